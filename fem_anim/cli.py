@@ -1,0 +1,94 @@
+"""The ``fem-anim`` command line.
+
+    fem-anim run [SCENE.toml] [-o OUTDIR] [--set KEY=VALUE ...] [--solver NAME] [--quiet]
+                 [PETSc options ...]
+    fem-anim solvers
+
+PETSc options (``-snes_*``, ``-ksp_*``, ``-pc_*``, ``-mat_*`` and global ones such as
+``-log_view``) are split off before argparse sees the arguments and reach the step
+solver with the highest precedence (:mod:`fem_anim.petsc_options`). Every error a user
+can cause ends with one line ``fem-anim: error: ...`` on stderr and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from .errors import FemAnimError
+from .petsc_options import init_petsc, split_petsc_args
+
+__all__ = ["main", "build_parser"]
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse's own errors: one line, exit 2, like ours
+        raise FemAnimError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="fem-anim", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    run = sub.add_parser("run", help="simulate a scene (default: the hanging beam)")
+    run.add_argument("scene", nargs="?", help="scene TOML file (default: embedded hanging beam)")
+    run.add_argument("-o", "--output", help="output directory (default out/<scene name>)")
+    run.add_argument("--set", dest="overrides", action="append", default=[],
+                     metavar="KEY=VALUE", help="override a scene key (value parsed as TOML)")
+    run.add_argument("--solver", help="linear solver preset (see `fem-anim solvers`)")
+    run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    sub.add_parser("solvers", help="list the linear solver presets and their PETSc options")
+    return parser
+
+
+def _print_error(message: str) -> None:
+    from mpi4py import MPI
+
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"fem-anim: error: {message}", file=sys.stderr, flush=True)
+
+
+def _run(args, cli_options: dict[str, str]) -> int:
+    from mpi4py import MPI
+
+    from .scene import load_scene
+    from .simulation import Simulation
+
+    scene = load_scene(args.scene, args.overrides)
+    out = args.output or scene["output"]["directory"] or f"out/{scene.name}"
+    sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
+    result = sim.run(Path(out), quiet=args.quiet)
+    if MPI.COMM_WORLD.rank == 0 and not args.quiet:
+        last = result.rows[-1]
+        print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "
+              f"total energy {last['total_energy']:.6g} J; outputs in {result.output_dir}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``fem-anim``; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    app_args, solver_options, global_args = split_petsc_args(argv)
+    init_petsc(global_args)
+    logging.getLogger().setLevel(logging.WARNING)
+    try:
+        args = build_parser().parse_args(app_args)
+        if args.command == "solvers":
+            from .presets import describe_presets
+
+            print(describe_presets())
+            return 0
+        return _run(args, solver_options)
+    except FemAnimError as err:
+        _print_error(str(err))
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        _print_error("interrupted")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

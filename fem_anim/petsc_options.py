@@ -1,0 +1,131 @@
+"""PETSc options: command-line splitting, initialisation and precedence (STYLE rules 5-6).
+
+Precedence, lowest to highest: library defaults < solver preset < scene
+``[solver.petsc]`` < command line. The merged options are put into PETSc's
+database under the solver's prefix only while the solver reads them
+(``setFromOptions``), then removed, so two solvers never see each other's options.
+
+PETSc must be initialised from ``argv`` before ``dolfinx`` is imported, so that
+global options such as ``-log_view`` take effect; :func:`init_petsc` does that.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import Iterator, Mapping
+
+__all__ = [
+    "DEFAULT_PREFIX",
+    "GLOBAL_OPTIONS",
+    "split_petsc_args",
+    "init_petsc",
+    "flatten_options",
+    "merge_options",
+    "options_in_database",
+]
+
+DEFAULT_PREFIX = "fem_anim_"
+
+#: Options that belong to PETSc as a whole and are passed to PetscInitialize as they are.
+GLOBAL_OPTIONS = frozenset({
+    "log_view", "log_view_memory", "options_left", "info", "malloc_debug", "malloc_dump",
+    "log_trace", "on_error_abort", "memory_view", "help",
+})
+
+#: Families of solver options accepted on the command line (without prefix).
+SOLVER_FAMILIES = ("snes_", "ksp_", "pc_", "mat_", "fem_anim_")
+
+
+def _is_value(token: str) -> bool:
+    if not token.startswith("-"):
+        return True
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def split_petsc_args(argv: list[str]) -> tuple[list[str], dict[str, str], list[str]]:
+    """Separate PETSc options from the application's own arguments.
+
+    Args:
+        argv: Arguments after the sub-command, e.g. ``["scene.toml", "-snes_monitor"]``.
+
+    Returns:
+        ``(app_args, solver_options, global_args)``: the arguments for argparse, the
+        solver options (names without leading dash or prefix, values as strings, ``""``
+        for flags) and the global PETSc options as an argv list.
+    """
+    app: list[str] = []
+    solver: dict[str, str] = {}
+    global_args: list[str] = []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        name = tok[1:]
+        is_option = tok.startswith("-") and not tok.startswith("--") and len(tok) > 2
+        if is_option and (name in GLOBAL_OPTIONS or name.startswith(SOLVER_FAMILIES)):
+            value = ""
+            if i + 1 < len(argv) and _is_value(argv[i + 1]):
+                value = argv[i + 1]
+                i += 1
+            if name in GLOBAL_OPTIONS:
+                global_args += [tok] + ([value] if value else [])
+            else:
+                if name.startswith(DEFAULT_PREFIX):
+                    name = name[len(DEFAULT_PREFIX):]
+                solver[name] = value
+        else:
+            app.append(tok)
+        i += 1
+    return app, solver, global_args
+
+
+def init_petsc(global_args: list[str] | None = None) -> None:
+    """Initialise petsc4py with the global options, before dolfinx is imported."""
+    import petsc4py
+
+    if "petsc4py.PETSc" not in sys.modules:
+        petsc4py.init([sys.argv[0]] + list(global_args or []))
+
+
+def flatten_options(table: Mapping, parent: str = "") -> dict[str, str]:
+    """Flatten a nested options table: ``{"ksp": {"type": "cg"}}`` -> ``{"ksp_type": "cg"}``.
+
+    Booleans become PETSc's ``true``/``false``; ``true`` for a flag may also be written ``""``.
+    """
+    flat: dict[str, str] = {}
+    for key, value in table.items():
+        name = f"{parent}_{key}" if parent else str(key)
+        if isinstance(value, Mapping):
+            flat.update(flatten_options(value, name))
+        elif isinstance(value, bool):
+            flat[name] = "true" if value else "false"
+        else:
+            flat[name] = str(value)
+    return flat
+
+
+def merge_options(*layers: Mapping[str, str]) -> dict[str, str]:
+    """Merge option layers, later layers winning (defaults, preset, scene, command line)."""
+    merged: dict[str, str] = {}
+    for layer in layers:
+        merged.update(layer)
+    return merged
+
+
+@contextlib.contextmanager
+def options_in_database(prefix: str, options: Mapping[str, str]) -> Iterator[None]:
+    """Put ``options`` under ``prefix`` in PETSc's database for the duration of the block."""
+    from petsc4py import PETSc
+
+    db = PETSc.Options()
+    for name, value in options.items():
+        db.setValue(prefix + name, value)
+    try:
+        yield
+    finally:
+        for name in options:
+            db.delValue(prefix + name)

@@ -1,0 +1,252 @@
+"""The step objective bound to DOLFINx: the one module that turns forms into kernels.
+
+:class:`EnergyProblem` composes, from a scene, the UFL step objective
+
+    g(u) = 1/2 ||u - u_pred||_M^2 + w [ int psi(F(u)) dV + E_gravity(u) ]     (seed eq. 4)
+
+(``forms/``: a material's ``psi``, :mod:`forms.inertia`, :mod:`forms.gravity`,
+:mod:`forms.integrator`), takes the residual and Jacobian by ``ufl.derivative`` of
+that single form (STYLE rule 2), compiles everything once, and offers the assembly
+callbacks a PETSc SNES needs (:meth:`objective`, :meth:`residual`, :meth:`jacobian`).
+Only terms the scene declares are built: without ``[gravity]`` there is no gravity
+form. The energies reported per step (kinetic, elastic, gravity) are separate scalar
+forms over the same measures.
+
+The unknown is the displacement u = x - X (x deformed, X rest positions); pinned dofs
+are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import basix
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fem_petsc
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fem_anim.forms import gravity as gravity_forms
+from fem_anim.forms import inertia as inertia_forms
+from fem_anim.forms.integrator import SCHEMES, step_objective
+from fem_anim.forms.kinematics import deformation_gradient
+from fem_anim.forms.lame import lame_parameters
+from fem_anim.forms.material import EXTRA_DATA, get_material
+
+from . import compat
+from .errors import SceneError
+from .mesh import SimplexMesh
+
+__all__ = ["EnergyProblem", "QuadratureData", "default_quadrature_degree"]
+
+JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-march=native"]}
+
+
+def default_quadrature_degree(degree: int) -> int:
+    """Quadrature degree of the elastic term: exact for P1 (constant F), 2(k-1) for P_k."""
+    return max(1, 2 * (degree - 1))
+
+
+@dataclass
+class QuadratureData:
+    """Per-quadrature-point data a material's ``psi`` takes, recomputed from the current F.
+
+    Holds a quadrature-space Function and the compiled expression of F at the points of
+    the elastic quadrature rule; :meth:`update` evaluates F on every local cell (owned
+    and ghost, so no communication is needed) and applies the numpy map of
+    :data:`forms.material.EXTRA_DATA` in one vectorised call.
+    """
+
+    function: fem.Function
+    F_expression: fem.Expression
+    evaluate: object
+    num_cells: int
+    d: int
+
+    def update(self) -> None:
+        cells = np.arange(self.num_cells, dtype=np.int32)
+        F = self.F_expression.eval(cells).reshape(-1, self.d, self.d)
+        values = self.evaluate(F).reshape(self.num_cells, -1)
+        dofs = self.function.function_space.dofmap.list.array.reshape(self.num_cells, -1)
+        bs = self.function.function_space.dofmap.bs
+        target = self.function.x.array.reshape(-1, bs)
+        target[dofs.ravel()] = values.reshape(-1, bs)
+
+
+@dataclass
+class EnergyProblem:
+    """Forms, functions and assembly callbacks of one scene's step objective."""
+
+    scene: object
+    domain: SimplexMesh
+    quadrature_degree: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        scene, mesh = self.scene, self.domain.mesh
+        self.comm: MPI.Comm = mesh.comm
+        self.d = d = mesh.topology.dim
+        degree = scene["element"]["degree"]
+        self.quadrature_degree = scene["element"]["quadrature_degree"]
+        if self.quadrature_degree is None:
+            self.quadrature_degree = default_quadrature_degree(degree)
+        self.scheme = SCHEMES[scene["time"]["integrator"]]
+        self.material = get_material(scene["material"]["model"])
+
+        V = self.V = compat.vector_space(mesh, degree)
+        self.u = fem.Function(V, name="displacement")
+        self.u_pred = fem.Function(V, name="predictor")
+        self.u_prev = fem.Function(V, name="previous_displacement")
+        self.v = fem.Function(V, name="velocity")
+        self.u_bc = fem.Function(V, name="pinned_displacement")
+
+        mat = scene["material"]
+        mu, lmbda = lame_parameters(mat["youngs_modulus"], mat["poisson_ratio"])
+        self.mu = fem.Constant(mesh, PETSc.ScalarType(mu))
+        self.lmbda = fem.Constant(mesh, PETSc.ScalarType(lmbda))
+        self.rho = fem.Constant(mesh, PETSc.ScalarType(mat["density"]))
+        self.weight = fem.Constant(mesh, PETSc.ScalarType(0.0))
+
+        dx = ufl.Measure("dx", domain=mesh)
+        self.dx_elastic = dx(metadata={"quadrature_degree": self.quadrature_degree})
+        self.dx_mass = inertia_forms.mass_measure(dx, degree, mat["mass"] == "lumped")
+        # Gravity shares the inertia measure: exact either way (linear integrand; for lumped
+        # P1 the vertex rule gives exactly sum_i m_i g.u_i). Integrating it at a lower degree
+        # in the same form as the inertia term miscompiles under FFCx 0.5 (the compiled sum
+        # differs from the sum of the separately compiled terms; tests/test_problem.py).
+        self.dx_load = self.dx_mass
+
+        self.quadrature_data: list[QuadratureData] = []
+        elastic_u = self._elastic_energy(self.u)
+        gravity_u = None
+        self.g = None
+        if "gravity" in scene.data:
+            self.g = fem.Constant(mesh, np.asarray(scene["gravity"]["acceleration"],
+                                                   dtype=PETSc.ScalarType))
+            gravity_u = gravity_forms.gravity_potential(self.u, self.rho, self.g, self.dx_load)
+
+        potential = elastic_u if gravity_u is None else elastic_u + gravity_u
+        if self.scheme.explicit:
+            # Symplectic Euler: E linearised at u_prev, grad E(u_prev) . u (forms/integrator.py)
+            at_prev = self._elastic_energy(self.u_prev)
+            if gravity_u is not None:
+                at_prev += gravity_forms.gravity_potential(self.u_prev, self.rho, self.g,
+                                                           self.dx_load)
+            potential = ufl.derivative(at_prev, self.u_prev, self.u)
+        inertia = inertia_forms.inertia(self.u, self.u_pred, self.rho, self.dx_mass)
+        objective = step_objective(inertia, potential, self.weight)
+        du, dv = ufl.TrialFunction(V), ufl.TestFunction(V)
+        residual = ufl.derivative(objective, self.u, dv)
+        jacobian = ufl.derivative(residual, self.u, du)
+
+        self.ufl_objective = objective
+        self.objective_form = fem.form(objective, jit_params=JIT_OPTIONS)
+        self.residual_form = fem.form(residual, jit_params=JIT_OPTIONS)
+        self.jacobian_form = fem.form(jacobian, jit_params=JIT_OPTIONS)
+        self.energy_forms = {
+            "kinetic": fem.form(inertia_forms.kinetic_energy(self.v, self.rho, self.dx_mass),
+                                jit_params=JIT_OPTIONS),
+            "elastic": fem.form(elastic_u, jit_params=JIT_OPTIONS),
+        }
+        if gravity_u is not None:
+            self.energy_forms["gravity"] = fem.form(gravity_u, jit_params=JIT_OPTIONS)
+        self.mass_form = fem.form(self.rho * ufl.inner(du, dv) * self.dx_mass,
+                                  jit_params=JIT_OPTIONS)
+        self.potential_gradient_form = fem.form(
+            ufl.derivative(elastic_u if gravity_u is None else elastic_u + gravity_u,
+                           self.u, dv), jit_params=JIT_OPTIONS)
+
+        self.bcs = self._pins()
+        self.x_work = self.u.vector.duplicate()
+
+    # -- construction helpers -------------------------------------------------------------
+    def _elastic_energy(self, u):
+        F = deformation_gradient(u)
+        extra = {}
+        for key in self.material.needs(self.d):
+            data = EXTRA_DATA[key]
+            Q = compat.quadrature_space(self.domain.mesh, self.quadrature_degree,
+                                        data.value_shape(self.d))
+            function = fem.Function(Q, name=key)
+            cell = self.domain.mesh.topology.cell_name()
+            points, _ = basix.make_quadrature(basix.quadrature.string_to_type("default"),
+                                              basix.cell.string_to_type(cell),
+                                              self.quadrature_degree)
+            index_map = self.domain.mesh.topology.index_map(self.d)
+            self.quadrature_data.append(QuadratureData(
+                function, fem.Expression(F, points, jit_params=JIT_OPTIONS), data.evaluate,
+                index_map.size_local + index_map.num_ghosts, self.d))
+            extra[data.keyword] = function
+        psi = self.material.psi(F, self.mu, self.lmbda, **extra)
+        return psi * self.dx_elastic
+
+    def _pins(self) -> list:
+        bcs = []
+        for i, pin in enumerate(self.scene["pin"]):
+            lo = np.asarray(pin["min"], dtype=float)
+            hi = np.asarray(pin["max"], dtype=float)
+
+            def inside(x, lo=lo, hi=hi):
+                d = lo.size
+                return np.all((x[:d].T >= lo) & (x[:d].T <= hi), axis=1)
+
+            dofs = fem.locate_dofs_geometrical(self.V, inside)
+            owned = dofs[dofs < self.V.dofmap.index_map.size_local]
+            if self.comm.allreduce(owned.size, op=MPI.SUM) == 0:
+                raise SceneError(f"pin[{i}] ({pin['name']}): the box min {pin['min']}, max "
+                                 f"{pin['max']} contains no mesh vertex")
+            bcs.append(fem.dirichletbc(self.u_bc, dofs))
+        return bcs
+
+    # -- assembly -------------------------------------------------------------------------
+    def set_state(self, x: PETSc.Vec) -> None:
+        """Copy a solver iterate into ``u`` (with ghosts) and refresh quadrature data."""
+        x.copy(self.u.vector)
+        self.u.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        for data in self.quadrature_data:
+            data.update()
+
+    def assemble_scalar(self, form) -> float:
+        """A scalar form summed over all ranks."""
+        return self.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
+
+    def objective(self, snes, x: PETSc.Vec) -> float:
+        """g(x) for the SNES line search and trust region (STYLE rule 7)."""
+        self.set_state(x)
+        return self.assemble_scalar(self.objective_form)
+
+    def residual(self, snes, x: PETSc.Vec, b: PETSc.Vec) -> None:
+        """grad g(x), with pinned rows replaced by x - u_bc."""
+        self.set_state(x)
+        with b.localForm() as b_local:
+            b_local.set(0.0)
+        fem_petsc.assemble_vector(b, self.residual_form)
+        fem_petsc.apply_lifting(b, [self.jacobian_form], bcs=[self.bcs], x0=[x], scale=-1.0)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fem_petsc.set_bc(b, self.bcs, x, -1.0)
+
+    def jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
+        """Hessian of g at x (line-search trials may have left another state in u)."""
+        self.set_state(x)
+        A.zeroEntries()
+        fem_petsc.assemble_matrix(A, self.jacobian_form, self.bcs)
+        A.assemble()
+
+    def create_matrix(self) -> PETSc.Mat:
+        """The Jacobian matrix, sparsity and preallocation built once."""
+        A = fem_petsc.create_matrix(self.jacobian_form)
+        A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        return A
+
+    def create_vector(self) -> PETSc.Vec:
+        return fem_petsc.create_vector(self.residual_form)
+
+    def energies(self) -> dict[str, float]:
+        """Kinetic, elastic and gravitational energy of the current (u, v) state."""
+        for data in self.quadrature_data:
+            data.update()
+        values = {name: self.assemble_scalar(form) for name, form in self.energy_forms.items()}
+        values.setdefault("gravity", 0.0)
+        values["total_energy"] = values["kinetic"] + values["elastic"] + values["gravity"]
+        return values

@@ -1,0 +1,25 @@
+"""Terminal progress bar of a run (rank 0, stderr): steps/s and Newton iterations."""
+
+from __future__ import annotations
+
+__all__ = ["Progress"]
+
+
+class Progress:
+    """A tqdm bar over the steps; a no-op when disabled (``--quiet``, ranks > 0)."""
+
+    def __init__(self, total: int, disable: bool = False):
+        self._bar = None
+        if not disable:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, unit="step", desc="fem-anim", dynamic_ncols=True)
+
+    def update(self, newton_its: int) -> None:
+        if self._bar is not None:
+            self._bar.set_postfix(newton=newton_its, refresh=False)
+            self._bar.update(1)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()

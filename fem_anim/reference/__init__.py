@@ -1,0 +1,83 @@
+"""Independent numpy/scipy implementation of the seed's P1 FEM discretisation.
+
+The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipeline
+
+* :mod:`.tensor` - column-major ``vec`` (eq. (30)), cofactor, polar decomposition;
+* :mod:`.materials` - ``psi``, ``P``, ``dP/dF`` of each material model (section 4.4);
+* :mod:`.geometry` - ``D_m``, ``D_s``, ``F = D_s D_m^{-1}``, ``w``, ``G_e`` (eqs. (25)-(34));
+* :mod:`.mesh` - structured box meshes for tests;
+* :mod:`.assembly` - global elastic energy, gradient and Hessian (eq. (27));
+* :mod:`.mass` - consistent and lumped mass matrices (eqs. (17)-(20)), gravity potential;
+* :mod:`.problem` - the potential energy with mass and pins;
+* :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
+* :mod:`.integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
+"""
+
+from fem_anim.reference.assembly import elastic_energy, elastic_gradient, elastic_hessian
+from fem_anim.reference.geometry import (
+    cell_dofs,
+    cell_volumes,
+    deformation_gradient,
+    deformed_shape_matrix,
+    gradient_operator,
+    rest_shape_matrix,
+)
+from fem_anim.reference.integrators import (
+    INTEGRATORS,
+    State,
+    Trajectory,
+    bdf2_step,
+    implicit_euler_step,
+    initial_state,
+    newmark_step,
+    simulate,
+    symplectic_euler_step,
+)
+from fem_anim.reference.mass import gravity_energy, gravity_gradient, mass_matrix, vertex_masses
+from fem_anim.reference.materials import (
+    MATERIALS,
+    first_piola,
+    first_piola_derivative,
+    lame_parameters,
+    psi,
+    stable_neohookean_parameters,
+)
+from fem_anim.reference.mesh import box_mesh
+from fem_anim.reference.newton import ConvergenceError, minimize_newton
+from fem_anim.reference.problem import EnergyProblem, build_problem
+
+__all__ = [
+    "INTEGRATORS",
+    "MATERIALS",
+    "ConvergenceError",
+    "EnergyProblem",
+    "State",
+    "Trajectory",
+    "bdf2_step",
+    "box_mesh",
+    "build_problem",
+    "cell_dofs",
+    "cell_volumes",
+    "deformation_gradient",
+    "deformed_shape_matrix",
+    "elastic_energy",
+    "elastic_gradient",
+    "elastic_hessian",
+    "first_piola",
+    "first_piola_derivative",
+    "gradient_operator",
+    "gravity_energy",
+    "gravity_gradient",
+    "implicit_euler_step",
+    "initial_state",
+    "lame_parameters",
+    "mass_matrix",
+    "minimize_newton",
+    "newmark_step",
+    "psi",
+    "rest_shape_matrix",
+    "simulate",
+    "stable_neohookean_parameters",
+    "symplectic_euler_step",
+    "vertex_masses",
+]

@@ -1,0 +1,330 @@
+"""Scene files: schema, defaults, validation and ``--set`` overrides (STYLE rule 8).
+
+A scene is TOML data, never code. :func:`load_scene` parses it, applies
+``--set KEY=VALUE`` overrides and validates everything before anything is built:
+unknown keys, wrong types and nonphysical values raise :class:`SceneError` with the
+dotted key path, the constraint and the value.
+
+Sections describing the body and the run (``mesh``, ``element``, ``material``,
+``time``, ``solver``, ``output``) fall back key by key to :data:`DEFAULTS`; physical
+terms (``gravity``, ``pin``) exist only when the scene declares them.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from .errors import SceneError
+
+__all__ = ["Scene", "load_scene", "parse_override", "DEFAULTS", "SCHEMA", "default_scene_text"]
+
+MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
+                   "corotated_lagged")
+INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
+MESH_SHAPES = ("box", "file")
+MAX_MAGNITUDE = 1.0e150  # larger values are taken as a typo or an attack, not physics
+
+
+@dataclass(frozen=True)
+class Key:
+    """One scene key: its type, default (``None``: required or derived) and constraint."""
+
+    kind: type | tuple[type, ...]
+    default: Any = None
+    check: Callable[[Any], str | None] | None = None
+    length: tuple[int, ...] | None = None  # allowed list lengths
+
+
+def _positive(v) -> str | None:
+    return None if v > 0 else "must be > 0"
+
+
+def _non_negative(v) -> str | None:
+    return None if v >= 0 else "must be >= 0"
+
+
+def _one_of(options) -> Callable[[Any], str | None]:
+    return lambda v: None if v in options else f"must be one of {', '.join(options)}"
+
+
+def _in_open(lo, hi) -> Callable[[Any], str | None]:
+    return lambda v: None if lo < v < hi else f"must be in ({lo}, {hi})"
+
+
+def _all_positive(v) -> str | None:
+    return None if all(c > 0 for c in v) else "must have all entries > 0"
+
+
+NUM = (int, float)
+SCHEMA: dict[str, dict[str, Key]] = {
+    "": {"name": Key(str, "scene")},
+    "mesh": {
+        "shape": Key(str, "box", _one_of(MESH_SHAPES)),
+        "dim": Key(int, 3, _one_of((2, 3))),
+        "size": Key(list, [1.0, 0.2, 0.2], _all_positive, (2, 3)),
+        "origin": Key(list, None, None, (2, 3)),
+        "element_size": Key(NUM, 0.05, _positive),
+        "file": Key(str, None),
+    },
+    "element": {
+        "degree": Key(int, 1, _one_of((1, 2))),
+        "quadrature_degree": Key(int, None, lambda v: None if 0 <= v <= 12 else
+                                 "must be in 0..12"),
+    },
+    "material": {
+        "model": Key(str, "neohookean", _one_of(MATERIAL_MODELS)),
+        "youngs_modulus": Key(NUM, 1.0e5, _positive),
+        "poisson_ratio": Key(NUM, 0.3, _in_open(-1.0, 0.5)),
+        "density": Key(NUM, 1000.0, _positive),
+        "mass": Key(str, "consistent", _one_of(("consistent", "lumped"))),
+    },
+    "time": {
+        "integrator": Key(str, "newmark", _one_of(INTEGRATORS)),
+        "dt": Key(NUM, 1.0 / 60.0, _positive),
+        "steps": Key(int, 60, lambda v: None if v >= 1 else "must be >= 1"),
+    },
+    "gravity": {"acceleration": Key(list, None, None, (2, 3))},
+    "pin": {
+        "name": Key(str, "pin"),
+        "min": Key(list, None, None, (2, 3)),
+        "max": Key(list, None, None, (2, 3)),
+    },
+    "solver": {
+        "preset": Key(str, "cholesky"),
+        "petsc": Key(dict, {}),
+    },
+    "output": {
+        "directory": Key(str, None),
+        "every": Key(int, 1, lambda v: None if v >= 1 else "must be >= 1"),
+        "render": Key(bool, True),
+    },
+}
+#: Sections that exist only when a scene declares them (physical terms).
+OPTIONAL_SECTIONS = ("gravity",)
+#: Sections that are arrays of tables (``[[pin]]``).
+ARRAY_SECTIONS = ("pin",)
+#: Keys without a default that a declared optional section must give.
+REQUIRED = {"gravity": ("acceleration",), "pin": ("min", "max")}
+
+DEFAULTS: dict[str, dict[str, Any]] = {
+    section: {k: key.default for k, key in keys.items()}
+    for section, keys in SCHEMA.items() if section not in OPTIONAL_SECTIONS + ARRAY_SECTIONS
+}
+
+
+@dataclass
+class Scene:
+    """A validated scene: plain nested dictionaries plus where it came from."""
+
+    data: dict[str, Any]
+    source: str = "<default scene>"
+    base_dir: Path = field(default_factory=Path.cwd)
+
+    def __getitem__(self, section: str) -> Any:
+        return self.data[section]
+
+    def get(self, section: str, default: Any = None) -> Any:
+        return self.data.get(section, default)
+
+    @property
+    def name(self) -> str:
+        return self.data["name"]
+
+    @property
+    def dim(self) -> int:
+        return self.data["mesh"]["dim"]
+
+
+def default_scene_text() -> str:
+    """The TOML text of the embedded default scene (the hanging beam)."""
+    return resources.files("fem_anim").joinpath("default_scene.toml").read_text()
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """Parse one ``--set KEY=VALUE``; the value is TOML, a bare word is taken as a string."""
+    if "=" not in text:
+        raise SceneError(f"--set expects KEY=VALUE, got {text!r}")
+    key, raw = text.split("=", 1)
+    path = key.strip().split(".")
+    if not all(path):
+        raise SceneError(f"--set key {key!r} is not a dotted key path")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        if raw.strip().replace("_", "").replace("-", "").isalnum():
+            value = raw.strip()
+        else:
+            raise SceneError(f"--set {key}: value {raw!r} is not valid TOML") from None
+    return path, value
+
+
+def _apply_override(data: dict, path: list[str], value: Any) -> None:
+    node = data
+    for i, part in enumerate(path[:-1]):
+        if part.isdigit() and isinstance(node, list):
+            idx = int(part)
+            if idx >= len(node):
+                raise SceneError(f"--set {'.'.join(path)}: there is no entry {idx} in "
+                                 f"{'.'.join(path[:i])}")
+            node = node[idx]
+            continue
+        nxt = node.setdefault(part, {})
+        if not isinstance(nxt, (dict, list)):
+            raise SceneError(f"--set {'.'.join(path)}: {'.'.join(path[:i + 1])} is not a table")
+        node = nxt
+    if not isinstance(node, dict):
+        raise SceneError(f"--set {'.'.join(path)}: cannot set a key inside a list")
+    node[path[-1]] = value
+
+
+def _type_name(kind) -> str:
+    names = {int: "an integer", float: "a number", str: "a string", list: "a list",
+             dict: "a table", bool: "true or false"}
+    if isinstance(kind, tuple):
+        return "a number"
+    return names.get(kind, kind.__name__)
+
+
+def _check_finite(path: str, value: Any) -> None:
+    if isinstance(value, bool):
+        return
+    if isinstance(value, (int, float)):
+        if not math.isfinite(value):
+            raise SceneError(f"{path} must be finite, got {value}")
+        if abs(value) > MAX_MAGNITUDE:
+            raise SceneError(f"{path} must be at most {MAX_MAGNITUDE:g} in magnitude, "
+                             f"got {value:g}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_finite(f"{path}[{i}]", v)
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            _check_finite(f"{path}.{k}", v)
+
+
+def _validate_table(section: str, table: Any, keys: dict[str, Key], where: str) -> dict:
+    if not isinstance(table, dict):
+        raise SceneError(f"{where} must be a table, got {table!r}")
+    for k in table:
+        if k not in keys:
+            raise SceneError(f"unknown key {where}.{k} (known: {', '.join(keys)})".replace(
+                "unknown key .", "unknown key "))
+    out = {}
+    for k, key in keys.items():
+        path = f"{where}.{k}" if where else k
+        if k not in table:
+            if section in REQUIRED and k in REQUIRED[section]:
+                raise SceneError(f"{path} is required")
+            out[k] = key.default
+            continue
+        value = table[k]
+        ok = isinstance(value, key.kind) and not (isinstance(value, bool) and key.kind is not bool)
+        if key.kind is NUM and isinstance(value, bool):
+            ok = False
+        if not ok:
+            raise SceneError(f"{path} must be {_type_name(key.kind)}, got {value!r}")
+        _check_finite(path, value)
+        if key.length is not None:
+            if len(value) not in key.length or not all(
+                    isinstance(c, NUM) and not isinstance(c, bool) for c in value):
+                raise SceneError(f"{path} must be a list of {' or '.join(map(str, key.length))}"
+                                 f" numbers, got {value!r}")
+        if key.check is not None and (msg := key.check(value)):
+            raise SceneError(f"{path} {msg}, got {value!r}")
+        out[k] = value
+    return out
+
+
+def _validate(raw: Mapping[str, Any]) -> dict[str, Any]:
+    for name in raw:
+        if name not in SCHEMA or name == "":
+            if name != "name":
+                raise SceneError(f"unknown section or key {name!r} (known: "
+                                 f"{', '.join(['name'] + [s for s in SCHEMA if s])})")
+    data = _validate_table("", {"name": raw["name"]} if "name" in raw else {}, SCHEMA[""], "")
+    for section, keys in SCHEMA.items():
+        if not section:
+            continue
+        if section in ARRAY_SECTIONS:
+            entries = raw.get(section, [])
+            if not isinstance(entries, list):
+                raise SceneError(f"{section} must be an array of tables ([[{section}]])")
+            data[section] = [_validate_table(section, e, keys, f"{section}[{i}]")
+                             for i, e in enumerate(entries)]
+        elif section in OPTIONAL_SECTIONS:
+            if section in raw:
+                data[section] = _validate_table(section, raw[section], keys, section)
+        else:
+            data[section] = _validate_table(section, raw.get(section, {}), keys, section)
+    _check_consistency(data)
+    return data
+
+
+def _check_consistency(data: dict[str, Any]) -> None:
+    """Cross-key rules: dimensions agree, files exist, settings are compatible."""
+    d = data["mesh"]["dim"]
+    mesh = data["mesh"]
+    if mesh["shape"] == "box" and len(mesh["size"]) != d:
+        raise SceneError(f"mesh.size must have {d} entries for mesh.dim = {d}, got {mesh['size']}")
+    if mesh["origin"] is not None and len(mesh["origin"]) != d:
+        raise SceneError(f"mesh.origin must have {d} entries for mesh.dim = {d}, "
+                         f"got {mesh['origin']}")
+    if mesh["shape"] == "file" and mesh["file"] is None:
+        raise SceneError("mesh.file is required when mesh.shape = \"file\"")
+    if mesh["shape"] == "box" and mesh["element_size"] > max(mesh["size"]):
+        raise SceneError(f"mesh.element_size must not exceed the box size "
+                         f"{max(mesh['size'])}, got {mesh['element_size']}")
+    if "gravity" in data and len(data["gravity"]["acceleration"]) != d:
+        raise SceneError(f"gravity.acceleration must have {d} entries for mesh.dim = {d}, "
+                         f"got {data['gravity']['acceleration']}")
+    for i, pin in enumerate(data["pin"]):
+        lo, hi = pin["min"], pin["max"]
+        if len(lo) != d or len(hi) != d:
+            raise SceneError(f"pin[{i}].min and pin[{i}].max must have {d} entries for "
+                             f"mesh.dim = {d}, got {lo} and {hi}")
+        if any(a > b for a, b in zip(lo, hi)):
+            raise SceneError(f"pin[{i}] ({pin['name']}) is an empty box: min {lo} exceeds "
+                             f"max {hi}")
+    if data["element"]["degree"] == 2 and data["material"]["mass"] == "lumped":
+        raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
+                         "(row-sum lumping of P2 gives zero or negative vertex masses); use "
+                         "\"consistent\"")
+    if not isinstance(data["solver"]["petsc"], dict):
+        raise SceneError("solver.petsc must be a table of PETSc options")
+
+
+def load_scene(path: str | Path | None = None, overrides: list[str] = ()) -> Scene:
+    """Read, override and validate a scene; ``path=None`` gives the default scene.
+
+    Raises:
+        SceneError: naming the file, key path, constraint and value.
+    """
+    if path is None:
+        text, source, base = default_scene_text(), "<default scene>", Path.cwd()
+    else:
+        p = Path(path)
+        try:
+            text = p.read_text()
+        except FileNotFoundError:
+            raise SceneError(f"scene file {p} does not exist") from None
+        except (OSError, UnicodeDecodeError) as err:
+            raise SceneError(f"scene file {p} cannot be read: {err}") from None
+        source, base = str(p), p.resolve().parent
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise SceneError(f"scene file {source} is not valid TOML: {err}") from None
+    for item in overrides:
+        key_path, value = parse_override(item)
+        _apply_override(raw, key_path, value)
+    try:
+        data = _validate(raw)
+    except SceneError as err:
+        raise SceneError(f"{source}: {err}") from None
+    return Scene(data=data, source=source, base_dir=base)

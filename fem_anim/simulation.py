@@ -1,0 +1,203 @@
+"""The time loop: scene -> mesh -> problem -> integrator -> solver -> output (STYLE rule 1).
+
+:class:`Simulation` builds everything a scene declares (collectively, under MPI),
+then :meth:`Simulation.run` advances ``time.steps`` steps of size ``time.dt``, each one
+minimisation of the step objective (seed eq. 4), writing frames, statistics and the
+final state. :meth:`Simulation.step` is the single step, usable on its own.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from dolfinx.fem import petsc as fem_petsc
+
+from .errors import ConvergenceError, FemAnimError
+from .integrator import Integrator, State
+from .mesh import build_mesh
+from .output import RunDirectory, StatsWriter, TrajectoryWriter, VertexGather, write_final
+from .petsc_options import flatten_options, merge_options
+from .presets import NEWTON_DEFAULTS, preset_options
+from .problem import EnergyProblem
+from .progress import Progress
+from .solver import Minimiser, SolveStats
+
+__all__ = ["Simulation", "RunResult", "solver_options"]
+
+
+def solver_options(scene, cli_options: dict[str, str] | None = None,
+                   preset: str | None = None) -> dict[str, str]:
+    """Merged PETSc options: defaults < preset < scene ``[solver.petsc]`` < command line.
+
+    Raises:
+        FemAnimError: for an unknown preset name (naming ``solver.preset`` or ``--solver``).
+    """
+    name = preset or scene["solver"]["preset"]
+    try:
+        layer = preset_options(name)
+    except KeyError as err:
+        key = "--solver" if preset else "solver.preset"
+        raise FemAnimError(f"{key}: {err.args[0]}") from None
+    return merge_options(NEWTON_DEFAULTS, layer, flatten_options(scene["solver"]["petsc"]),
+                         cli_options or {})
+
+
+@dataclass
+class RunResult:
+    """What a finished run produced."""
+
+    state: State
+    rows: list[dict]
+    output_dir: Path | None
+    final_displacement: np.ndarray | None  # rank 0, input vertex order
+
+
+class Simulation:
+    """One scene, built and ready to step.
+
+    Args:
+        scene: A validated :class:`~fem_anim.scene.Scene`.
+        comm: MPI communicator.
+        cli_options: PETSc options from the command line (highest precedence).
+        preset: Linear solver preset overriding ``solver.preset``.
+    """
+
+    def __init__(self, scene, comm: MPI.Comm = MPI.COMM_WORLD,
+                 cli_options: dict[str, str] | None = None, preset: str | None = None):
+        self.scene = scene
+        self.comm = comm
+        options = solver_options(scene, cli_options, preset)
+        self.domain = build_mesh(comm, scene)
+        self.problem = EnergyProblem(scene, self.domain)
+        self.integrator = Integrator(scene["time"]["integrator"])
+        self.minimiser = Minimiser(self.problem, options)
+        self.gather = VertexGather(self.domain, self.problem.V)
+
+    # -- state ----------------------------------------------------------------------------
+    def initial_state(self) -> State:
+        """Rest state; for Newmark a_0 = M^-1 f(x_0), zero on pinned dofs (seed eq. 1b)."""
+        p = self.problem
+        n = p.u.x.array.size
+        state = State(u=np.zeros(n), v=np.zeros(n), a=np.zeros(n))
+        if self.integrator.name == "newmark":
+            state.a = self._acceleration(state.u)
+        return state
+
+    def _acceleration(self, u: np.ndarray) -> np.ndarray:
+        p = self.problem
+        p.u.x.array[:] = u
+        for data in p.quadrature_data:
+            data.update()
+        f = fem_petsc.assemble_vector(p.potential_gradient_form)
+        f.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        f.scale(-1.0)
+        fem_petsc.set_bc(f, p.bcs, scale=0.0)
+        M = fem_petsc.assemble_matrix(p.mass_form, p.bcs)
+        M.assemble()
+        ksp = PETSc.KSP().create(self.comm)
+        ksp.setOperators(M)
+        ksp.setType("cg")
+        ksp.getPC().setType("jacobi")
+        ksp.setTolerances(rtol=1e-14, atol=0.0, max_it=10000)
+        a = f.duplicate()
+        ksp.solve(f, a)
+        a.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        with a.localForm() as loc:
+            out = loc.array.copy()
+        for obj in (ksp, M, f, a):
+            obj.destroy()
+        return out
+
+    # -- one step -------------------------------------------------------------------------
+    def step(self, state: State, h: float) -> tuple[State, SolveStats]:
+        """Advance one step of size ``h`` (stage, solve, update).
+
+        Raises:
+            ConvergenceError: if the minimisation fails; ``state`` is left untouched.
+        """
+        p, integ = self.problem, self.integrator
+        u_pred = integ.predictor(h, state)
+        p.u_pred.x.array[:] = u_pred
+        p.u_prev.x.array[:] = state.u
+        p.weight.value = integ.weight(h, state)
+        p.u.x.array[:] = u_pred
+        fem_petsc.set_bc(p.u.vector, p.bcs)
+        p.u.vector.copy(p.x_work)
+        stats = self.minimiser.solve(p.x_work, what=f"step {state.step + 1} "
+                                                    f"(t = {state.time + h:.6g} s)")
+        p.set_state(p.x_work)
+        new = integ.update(h, state, p.u.x.array.copy(), u_pred)
+        p.v.x.array[:] = new.v
+        return new, stats
+
+    # -- the run --------------------------------------------------------------------------
+    def run(self, output_dir: Path | None = None, quiet: bool = False) -> RunResult:
+        """Run ``time.steps`` steps, writing outputs to ``output_dir`` (None: no files)."""
+        cfg = self.scene["time"]
+        h, steps, every = cfg["dt"], cfg["steps"], self.scene["output"]["every"]
+        run_dir = RunDirectory(output_dir, self.comm) if output_dir is not None else None
+        try:
+            result = self._loop(h, steps, every, run_dir, quiet)
+        except BaseException:
+            if run_dir is not None:
+                run_dir.abandon()
+            raise
+        if run_dir is not None:
+            run_dir.commit()
+        return result
+
+    def _loop(self, h, steps, every, run_dir, quiet) -> RunResult:
+        stats_file = StatsWriter(run_dir.file("stats.csv"), self.comm) if run_dir else None
+        trajectory = TrajectoryWriter(run_dir.file("trajectory.xdmf"), self.domain) \
+            if run_dir else None
+        state = self.initial_state()
+        rows = []
+        progress = Progress(steps, disable=quiet or self.comm.rank != 0)
+        try:
+            if trajectory:
+                trajectory.write(0.0, self.gather.gather(state.u))
+            for _ in range(steps):
+                start = time.perf_counter()
+                state, solve = self.step(state, h)
+                energies = self.problem.energies()
+                self._check_finite(state, energies)
+                if trajectory and (state.step % every == 0 or state.step == steps):
+                    trajectory.write(state.time, self.gather.gather(state.u))
+                row = {"step": state.step, "time": state.time, "dt": h,
+                       "newton_its": solve.newton_its, "linear_its": solve.linear_its,
+                       "snes_reason": solve.reason, "residual_norm": solve.residual_norm,
+                       **energies, "solve_wall_s": solve.wall_s,
+                       "step_wall_s": time.perf_counter() - start}
+                rows.append(row)
+                if stats_file:
+                    stats_file.write(row)
+                progress.update(solve.newton_its)
+        finally:
+            progress.close()
+            if stats_file:
+                stats_file.close()
+            if trajectory:
+                trajectory.close()
+        final = self.gather.gather(state.u)
+        if run_dir is not None:
+            write_final(run_dir.file("final.vtu"), self.domain, final)
+            if self.scene["output"]["render"] and self.comm.rank == 0:
+                from .render import render_file
+
+                render_file(run_dir.file("final.vtu"), run_dir.file("final.png"),
+                            title=f"{self.scene.name}  t = {state.time:.3f} s")
+        return RunResult(state, rows, run_dir.path if run_dir else None, final)
+
+    def _check_finite(self, state: State, energies: dict[str, float]) -> None:
+        """No NaN or inf may reach a frame: stop with a clear message instead."""
+        bad = not (np.all(np.isfinite(state.u)) and all(map(math.isfinite, energies.values())))
+        if self.comm.allreduce(bad, op=MPI.LOR):
+            raise ConvergenceError(f"step {state.step} (t = {state.time:.6g} s) produced a "
+                                   "non-finite displacement or energy")
