@@ -51,13 +51,25 @@ def _print_error(message: str) -> None:
         print(f"fem-anim: error: {message}", file=sys.stderr, flush=True)
 
 
+def _quiet_jit_logging() -> None:
+    """Silence the FFCx JIT's build log on the terminal.
+
+    FFCx calls ``logging.basicConfig()``; every JIT compile runs setuptools' distutils,
+    which sets the root logger to INFO. Raising the handlers' level keeps warnings only.
+    """
+    for handler in logging.getLogger().handlers:
+        handler.setLevel(logging.WARNING)
+
+
 def _run(args, cli_options: dict[str, str]) -> int:
     from mpi4py import MPI
 
     from .scene import load_scene
+
+    scene = load_scene(args.scene, args.overrides)  # validate before importing dolfinx
     from .simulation import Simulation
 
-    scene = load_scene(args.scene, args.overrides)
+    _quiet_jit_logging()
     out = args.output or scene["output"]["directory"] or f"out/{scene.name}"
     sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
     result = sim.run(Path(out), quiet=args.quiet)
@@ -73,7 +85,6 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     app_args, solver_options, global_args = split_petsc_args(argv)
     init_petsc(global_args)
-    logging.getLogger().setLevel(logging.WARNING)
     try:
         args = build_parser().parse_args(app_args)
         if args.command == "solvers":

@@ -50,7 +50,7 @@ def _non_negative(v) -> str | None:
 
 
 def _one_of(options) -> Callable[[Any], str | None]:
-    return lambda v: None if v in options else f"must be one of {', '.join(options)}"
+    return lambda v: None if v in options else f"must be one of {', '.join(map(str, options))}"
 
 
 def _in_open(lo, hi) -> Callable[[Any], str | None]:

@@ -36,6 +36,10 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
                    preset: str | None = None) -> dict[str, str]:
     """Merged PETSc options: defaults < preset < scene ``[solver.petsc]`` < command line.
 
+    A preset's ``pc_*`` options describe its preconditioner; when the scene or the command
+    line chooses another ``pc_type``, they are dropped with it (``-pc_type icc`` on top of
+    the MUMPS ``cholesky`` preset is ICC, not "ICC by MUMPS").
+
     Raises:
         FemAnimError: for an unknown preset name (naming ``solver.preset`` or ``--solver``).
     """
@@ -45,8 +49,11 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
     except KeyError as err:
         key = "--solver" if preset else "solver.preset"
         raise FemAnimError(f"{key}: {err.args[0]}") from None
-    return merge_options(NEWTON_DEFAULTS, layer, flatten_options(scene["solver"]["petsc"]),
-                         cli_options or {})
+    above = merge_options(flatten_options(scene["solver"]["petsc"]), cli_options or {})
+    if above.get("pc_type", layer.get("pc_type")) != layer.get("pc_type"):
+        # a preset's pc_* options belong to its preconditioner: drop them with it
+        layer = {k: v for k, v in layer.items() if not k.startswith("pc_")}
+    return merge_options(NEWTON_DEFAULTS, layer, above)
 
 
 @dataclass

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from petsc4py import PETSc
 
-from .errors import ConvergenceError
+from .errors import ConvergenceError, FemAnimError
 from .petsc_options import DEFAULT_PREFIX, options_in_database
 
 __all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON"]
@@ -58,10 +58,18 @@ class Minimiser:
         snes.setJacobian(problem.jacobian, self.A)
         snes.setConvergenceTest(self._converged)
         self._history: list[tuple[float, float]] = []
-        with options_in_database(prefix, options):
-            snes.setFromOptions()
-            snes.getKSP().setFromOptions()
-            snes.getKSP().getPC().setFromOptions()
+        PETSc.Sys.pushErrorHandler("ignore")
+        try:
+            with options_in_database(prefix, options):
+                snes.setFromOptions()
+                snes.getKSP().setFromOptions()
+                snes.getKSP().getPC().setFromOptions()
+        except PETSc.Error as err:
+            shown = " ".join(f"-{k} {v}".strip() for k, v in sorted(options.items()))
+            raise FemAnimError(f"PETSc rejected the solver options (error {err.ierr}): "
+                               f"{shown}") from None
+        finally:
+            PETSc.Sys.popErrorHandler()
 
     def solve(self, x: PETSc.Vec, what: str = "step") -> SolveStats:
         """Minimise from the initial guess ``x`` (overwritten with the minimiser).

@@ -1,0 +1,44 @@
+"""Shared pytest set-up (STYLE rule 13): collect garbage and synchronise ranks after each test."""
+
+import gc
+import logging
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(autouse=True)
+def _mpi_hygiene():
+    yield
+    gc.collect()
+    from mpi4py import MPI
+
+    MPI.COMM_WORLD.barrier()
+    for handler in logging.getLogger().handlers:  # FFCx JIT build chatter
+        handler.setLevel(logging.WARNING)
+
+
+def fem_anim_command() -> list[str]:
+    """How to start the command line in a subprocess (the venv's Python)."""
+    return [sys.executable, "-m", "fem_anim"]
+
+
+def clean_environment() -> dict[str, str]:
+    """The environment without the MPI singleton's variables, for launching mpirun."""
+    return {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
+
+
+def mpirun_command(n: int) -> list[str] | None:
+    """``mpirun`` prefix for ``n`` ranks, or None if mpirun is unavailable."""
+    mpirun = shutil.which("mpirun")
+    if mpirun is None:
+        return None
+    cmd = [mpirun, "-n", str(n), "--oversubscribe"]
+    if os.geteuid() == 0:
+        cmd.append("--allow-run-as-root")
+    return cmd

@@ -1,0 +1,212 @@
+"""The path a user walks: ``fem-anim run`` on the default scene, options, overrides, errors.
+
+Issue 2's acceptance tests. Runs that need a fresh process (exit codes, stderr, MPI)
+start ``python -m fem_anim``; the rest call :func:`fem_anim.cli.main` in-process.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+import tomllib
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+from conftest import ROOT, clean_environment, fem_anim_command, mpirun_command
+
+from fem_anim.cli import main
+from fem_anim.scene import default_scene_text, load_scene
+
+
+def read_stats(path: Path) -> list[dict[str, float]]:
+    with open(path) as f:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def run_cli(args: list[str], cwd: Path, mpi: list[str] | None = None):
+    return subprocess.run((mpi or []) + fem_anim_command() + args, cwd=cwd,
+                          capture_output=True, text=True, timeout=600, env=clean_environment())
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory) -> Path:
+    """The default scene, run once for the whole module."""
+    out = tmp_path_factory.mktemp("default") / "beam"
+    assert main(["run", "-o", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_default_scene_outputs(default_run):
+    names = {p.name for p in default_run.iterdir()}
+    assert {"trajectory.xdmf", "trajectory.h5", "stats.csv", "final.vtu", "final.png"} <= names
+    assert not (default_run / ".partial").exists()
+    rows = read_stats(default_run / "stats.csv")
+    assert len(rows) == 60
+    assert rows[-1]["time"] == pytest.approx(1.0)
+    for row in rows:
+        for key in ("kinetic", "elastic", "gravity", "total_energy", "newton_its",
+                    "step_wall_s"):
+            assert math.isfinite(row[key]), (row["step"], key)
+        assert row["snes_reason"] > 0
+        assert row["total_energy"] == pytest.approx(
+            row["kinetic"] + row["elastic"] + row["gravity"], rel=1e-12, abs=1e-12)
+    # energy is exchanged, not created: Newmark keeps the total small against the swing
+    swing = max(abs(r["gravity"]) for r in rows)
+    assert max(abs(r["total_energy"]) for r in rows) < 5e-3 * swing
+
+
+def test_default_scene_beam_sags(default_run):
+    final = meshio.read(default_run / "final.vtu")
+    u = final.point_data["displacement"]
+    x = final.points
+    tip = np.isclose(x[:, 0], 1.0)
+    root = np.isclose(x[:, 0], 0.0)
+    assert tip.sum() > 0 and root.sum() > 0
+    assert np.all(u[tip, 2] < -0.05)  # tip z decreased
+    assert np.abs(u[root]).max() == 0.0  # pinned wall stays put
+
+
+def test_final_vtu_matches_last_xdmf_frame(default_run):
+    with meshio.xdmf.TimeSeriesReader(str(default_run / "trajectory.xdmf")) as reader:
+        points, cells = reader.read_points_cells()
+        frames = [reader.read_data(k) for k in range(reader.num_steps)]
+    assert len(frames) == 61  # the rest state and 60 steps
+    t, point_data, _ = frames[-1]
+    assert t == pytest.approx(1.0)
+    final = meshio.read(default_run / "final.vtu")
+    np.testing.assert_array_equal(final.points, points)
+    np.testing.assert_array_equal(point_data["displacement"], final.point_data["displacement"])
+    t0, data0, _ = frames[0]
+    assert t0 == 0.0 and np.abs(data0["displacement"]).max() == 0.0
+
+
+def test_final_png_is_an_image(default_run):
+    png = (default_run / "final.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_default_scene_file_in_demos_is_the_embedded_one():
+    demo = load_scene(ROOT / "demos" / "hanging_beam.toml")
+    assert demo.data == load_scene().data
+    assert tomllib.loads(default_scene_text())["name"] == "hanging_beam"
+
+
+def test_petsc_options_reach_the_solver(tmp_path):
+    direct, cg = tmp_path / "direct", tmp_path / "cg"
+    assert main(["run", "-o", str(direct), "-q", "--set", "time.steps=3"]) == 0
+    assert main(["run", "-o", str(cg), "-q", "--set", "time.steps=3",
+                 "-ksp_type", "cg", "-pc_type", "icc", "-ksp_rtol", "1e-10"]) == 0
+    rows_direct, rows_cg = read_stats(direct / "stats.csv"), read_stats(cg / "stats.csv")
+    # a direct solve is one "iteration" per Newton step; CG/ICC needs many
+    assert all(r["linear_its"] == r["newton_its"] for r in rows_direct)
+    assert all(r["linear_its"] > 5 * r["newton_its"] for r in rows_cg)
+    for a, b in zip(rows_direct, rows_cg):  # same steps (the total is a small difference)
+        for key in ("kinetic", "elastic", "gravity"):
+            assert b[key] == pytest.approx(a[key], rel=1e-6), key
+
+
+def test_scene_petsc_table_and_command_line_precedence(tmp_path):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(default_scene_text().replace(
+        'preset = "cholesky"', 'preset = "cholesky"\n[solver.petsc]\nsnes_max_it = 1'))
+    # the scene's snes_max_it = 1 cannot converge a Newton step from the predictor ...
+    r = run_cli(["run", str(scene), "-o", str(tmp_path / "a"), "-q",
+                 "--set", "time.steps=2"], tmp_path)
+    assert r.returncode == 2 and "did not converge after 1 Newton" in r.stderr
+    # ... and the command line wins over the scene file
+    r = run_cli(["run", str(scene), "-o", str(tmp_path / "b"), "-q", "--set", "time.steps=2",
+                 "-snes_max_it", "20"], tmp_path)
+    assert r.returncode == 0, r.stderr
+
+
+def test_set_overrides(tmp_path):
+    out = tmp_path / "o"
+    assert main(["run", "-o", str(out), "-q", "--set", "time.steps=2",
+                 "--set", "material.youngs_modulus=2e5", "--set", "material.model=stvk"]) == 0
+    assert len(read_stats(out / "stats.csv")) == 2
+
+
+def test_solvers_lists_presets(capsys):
+    assert main(["solvers"]) == 0
+    text = capsys.readouterr().out
+    assert "cholesky" in text and "-pc_type cholesky" in text
+
+
+BAD_INPUT = [
+    (["--set", "material.youngs_modulus=-1"], "material.youngs_modulus must be > 0, got -1"),
+    (["--set", "material.youngs_modulus=0"], "material.youngs_modulus must be > 0, got 0"),
+    (["--set", "material.poisson_ratio=0.5"], "material.poisson_ratio must be in (-1.0, 0.5)"),
+    (["--set", "material.poisson_ratio=-1.2"], "material.poisson_ratio must be in"),
+    (["--set", "material.density=0"], "material.density must be > 0"),
+    (["--set", "time.dt=0"], "time.dt must be > 0, got 0"),
+    (["--set", "time.dt=-0.1"], "time.dt must be > 0, got -0.1"),
+    (["--set", "time.steps=0"], "time.steps must be >= 1, got 0"),
+    (["--set", "time.steps=2.5"], "time.steps must be an integer, got 2.5"),
+    (["--set", "time.dt=nan"], "time.dt must be finite, got nan"),
+    (["--set", "time.dt=inf"], "time.dt must be finite, got inf"),
+    (["--set", "material.density=1e308"], "material.density must be at most"),
+    (["--set", 'material.model="rubber"'], "material.model must be one of"),
+    (["--set", "material.colour=1"], "unknown key material.colour"),
+    (["--set", "wind.speed=3"], "unknown section or key 'wind'"),
+    (["--set", 'time.dt="fast"'], "time.dt must be a number, got 'fast'"),
+    (["--set", "mesh.size=[1, 0.2]"], "mesh.size must have 3 entries"),
+    (["--set", "pin.0.min=[2, 0, 0]"], "pin[0] (wall) is an empty box"),
+    (["--set", "gravity.acceleration=[0, -9.81]"], "gravity.acceleration must have 3 entries"),
+    (["--set", "element.degree=3"], "element.degree must be one of 1, 2"),
+    (["--set", "element.degree=2", "--set", 'material.mass="lumped"'],
+     'material.mass = "lumped" is not supported with element.degree = 2'),
+    (["--set", "time.steps"], "--set expects KEY=VALUE"),
+    (["--set", "time.steps=[1"], "is not valid TOML"),
+    (["--solver", "gauss"], "--solver: unknown solver preset 'gauss'"),
+    (["--set", 'solver.preset="gauss"'], "solver.preset: unknown solver preset 'gauss'"),
+    (["--set", "pin.0.min=[0.5, 0.5, 0.5]", "--set", "pin.0.max=[0.6, 0.6, 0.6]"],
+     "contains no mesh vertex"),
+    (["no_such_scene.toml"], "scene file no_such_scene.toml does not exist"),
+    (["--frobnicate"], "unrecognized arguments: --frobnicate"),
+]
+
+
+@pytest.mark.parametrize("args, message", BAD_INPUT, ids=[m[:40] for _, m in BAD_INPUT])
+def test_bad_input_exits_2_with_one_message(tmp_path, args, message):
+    out = tmp_path / "out"
+    r = run_cli(["run", "-o", str(out), "-q"] + args, tmp_path)
+    assert r.returncode == 2, r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith("fem-anim: error: ") and message in lines[0], lines[0]
+    assert "Traceback" not in r.stderr
+    assert not out.exists()
+
+
+def test_malformed_scene_file(tmp_path):
+    scene = tmp_path / "broken.toml"
+    scene.write_text("[material\nmodel = 'stvk'\n")
+    r = run_cli(["run", str(scene), "-o", str(tmp_path / "out")], tmp_path)
+    assert r.returncode == 2
+    assert "broken.toml is not valid TOML" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.mpi
+def test_mpi_run_matches_serial(tmp_path):
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    args = ["run", "-q", "--set", "time.steps=12"]
+    serial = run_cli(args + ["-o", str(tmp_path / "serial")], tmp_path)
+    assert serial.returncode == 0, serial.stderr
+    parallel = run_cli(args + ["-o", str(tmp_path / "mpi")], tmp_path, mpi=mpirun)
+    assert parallel.returncode == 0, parallel.stderr
+    a, b = read_stats(tmp_path / "serial/stats.csv"), read_stats(tmp_path / "mpi/stats.csv")
+    assert len(a) == len(b) == 12
+    for ra, rb in zip(a, b):
+        for key in ("kinetic", "elastic", "gravity"):
+            assert rb[key] == pytest.approx(ra[key], rel=1e-8), (ra["step"], key)
+        # the total is a small difference of these: 1e-8 relative to the energy scale
+        scale = abs(ra["kinetic"]) + abs(ra["elastic"]) + abs(ra["gravity"])
+        assert abs(rb["total_energy"] - ra["total_energy"]) <= 1e-8 * scale, ra["step"]
+    ua = meshio.read(tmp_path / "serial/final.vtu").point_data["displacement"]
+    ub = meshio.read(tmp_path / "mpi/final.vtu").point_data["displacement"]
+    np.testing.assert_allclose(ub, ua, rtol=1e-8, atol=1e-10 * np.abs(ua).max())
