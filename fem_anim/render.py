@@ -60,8 +60,7 @@ def render_frame(path: Path, points: np.ndarray, cells: np.ndarray, displacement
     if d == 2:
         plotter.view_xy()
     else:
-        plotter.view_isometric()
-        plotter.camera.azimuth = -30
+        plotter.view_vector((0.35, -1.0, 0.3), viewup=(0.0, 0.0, 1.0))  # side view, z up
     plotter.show_axes()
     plotter.screenshot(str(path))
     plotter.close()
