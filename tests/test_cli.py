@@ -210,3 +210,10 @@ def test_mpi_run_matches_serial(tmp_path):
     ua = meshio.read(tmp_path / "serial/final.vtu").point_data["displacement"]
     ub = meshio.read(tmp_path / "mpi/final.vtu").point_data["displacement"]
     np.testing.assert_allclose(ub, ua, rtol=1e-8, atol=1e-10 * np.abs(ua).max())
+
+
+def test_log_view_reaches_petsc(tmp_path):
+    r = run_cli(["run", "-q", "--set", "time.steps=1", "-o", str(tmp_path / "o"), "-log_view"],
+                tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "PETSc Performance Summary" in r.stdout and "SNESSolve" in r.stdout
