@@ -21,7 +21,6 @@ The modal analysis assembles K and M densely, so these tests are serial only.
 
 from __future__ import annotations
 
-import gc
 from pathlib import Path
 
 import numpy as np
@@ -73,14 +72,6 @@ acceleration = [0.0, 0.0, -9.81]
 """
 
 ORDERS = {"newmark": 2, "implicit_euler": 1, "bdf2": 2}
-
-
-@pytest.fixture(autouse=True)
-def _collect():
-    """Free PETSc objects and keep ranks together between tests (STYLE rule 13)."""
-    yield
-    gc.collect()
-    MPI.COMM_WORLD.barrier()
 
 
 # --- building and driving the bar -------------------------------------------------------------
