@@ -4,9 +4,11 @@ The minimisation itself is the same for every scheme (:mod:`fem_anim.problem`,
 :mod:`forms.integrator`); a scheme differs only in the predictor y it stages before the
 solve and in how it updates velocity (and acceleration) after it:
 
-* :meth:`Integrator.stage` sets ``u_pred`` = y - X, the energy weight w and the initial
-  guess, from the state (u_n, v_n, a_n, and u_{n-1}, v_{n-1} for BDF2);
+* :meth:`Integrator.predictor` gives y - X and :meth:`Integrator.weight` the energy weight
+  w, from the state (u_n, v_n, a_n, and u_{n-1}, v_{n-1} for BDF2);
 * :meth:`Integrator.update` computes v_{n+1} (and a_{n+1}) from the solution.
+
+:meth:`fem_anim.simulation.Simulation.step` stages these into the problem and solves.
 
 All updates are whole-array numpy operations on local (owned + ghost) values, which are
 consistent across ranks because every operand is.

@@ -141,6 +141,7 @@ class EnergyProblem:
         jacobian = ufl.derivative(residual, self.u, du)
 
         self.ufl_objective = objective
+        self.ufl_elastic = elastic_u
         self.objective_form = fem.form(objective, jit_params=JIT_OPTIONS)
         self.residual_form = fem.form(residual, jit_params=JIT_OPTIONS)
         self.jacobian_form = fem.form(jacobian, jit_params=JIT_OPTIONS)

@@ -21,7 +21,7 @@ from dolfinx.fem import petsc as fem_petsc
 
 from .errors import ConvergenceError, FemAnimError
 from .integrator import Integrator, State
-from .mesh import build_mesh
+from .mesh import SimplexMesh, build_mesh
 from .output import RunDirectory, StatsWriter, TrajectoryWriter, VertexGather, write_final
 from .petsc_options import flatten_options, merge_options
 from .presets import NEWTON_DEFAULTS, preset_options
@@ -74,14 +74,17 @@ class Simulation:
         comm: MPI communicator.
         cli_options: PETSc options from the command line (highest precedence).
         preset: Linear solver preset overriding ``solver.preset``.
+        domain: A mesh made elsewhere (e.g. from arrays with
+            :func:`fem_anim.mesh.mesh_from_arrays`) instead of the scene's ``[mesh]``.
     """
 
     def __init__(self, scene, comm: MPI.Comm = MPI.COMM_WORLD,
-                 cli_options: dict[str, str] | None = None, preset: str | None = None):
+                 cli_options: dict[str, str] | None = None, preset: str | None = None,
+                 domain: SimplexMesh | None = None):
         self.scene = scene
         self.comm = comm
         options = solver_options(scene, cli_options, preset)
-        self.domain = build_mesh(comm, scene)
+        self.domain = domain if domain is not None else build_mesh(comm, scene)
         self.problem = EnergyProblem(scene, self.domain)
         self.integrator = Integrator(scene["time"]["integrator"])
         self.minimiser = Minimiser(self.problem, options)

@@ -81,12 +81,14 @@ class Minimiser:
         g0 = self.problem.objective(self.snes, x)
         self.snes.solve(None, x)
         reason = self.snes.getConvergedReason()
-        if reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
-                self._at_objective_roundoff(x, g0):
-            reason = ROUNDOFF_REASON
+        stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
+            self._at_objective_roundoff(x, g0)
+        norm = self.snes.getFunctionNorm()
+        if reason == ROUNDOFF_REASON or stalled:
+            reason, norm = self._polish(x)
         wall = time.perf_counter() - start
         stats = SolveStats(self.snes.getIterationNumber(), self.snes.getLinearSolveIterations(),
-                           reason, self.snes.getFunctionNorm(), wall)
+                           reason, norm, wall)
         if reason <= 0:
             ksp_reason = self.snes.getKSP().getConvergedReason()
             raise ConvergenceError(
@@ -143,6 +145,47 @@ class Minimiser:
         r.destroy()
         step.destroy()
         return decrement <= ROUNDOFF_ULPS * np.finfo(float).eps * max(abs(g), abs(g0))
+
+    def _polish(self, x: PETSc.Vec, max_steps: int = 5) -> tuple[int, float]:
+        """Full Newton steps judged by the residual, where g can no longer judge them.
+
+        Below the objective's round-off the line search cannot tell a good step from a bad
+        one, but the residual still can: take full steps while each at least halves the
+        residual norm, then apply the norm tests (``snes_atol``, ``snes_rtol``). If they
+        are still not met, x is as converged as double precision allows.
+
+        Returns:
+            The SNES reason to report and the final residual norm.
+        """
+        rtol, atol, _, _ = self.snes.getTolerances()
+        target = max(atol, rtol * self._history[0][0]) if self._history else atol
+        R = PETSc.SNES.ConvergedReason
+        r, step, trial, r_trial = (self.b.duplicate() for _ in range(4))
+        ksp = self.snes.getKSP()
+        try:
+            self.problem.residual(self.snes, x, r)
+            norm = r.norm()
+            for _ in range(max_steps):
+                if norm <= target:
+                    reason = R.CONVERGED_FNORM_ABS if norm <= atol else R.CONVERGED_FNORM_RELATIVE
+                    return reason, norm
+                self.problem.jacobian(self.snes, x, self.A, self.A)
+                ksp.setOperators(self.A, self.A)
+                ksp.solve(r, step)
+                x.copy(trial)
+                trial.axpy(-1.0, step)
+                self.problem.residual(self.snes, trial, r_trial)
+                trial_norm = r_trial.norm()
+                if not trial_norm <= 0.5 * norm:
+                    break
+                trial.copy(x)
+                r_trial.copy(r)
+                norm = trial_norm
+            self.problem.set_state(x)
+            return ROUNDOFF_REASON, norm
+        finally:
+            for v in (r, step, trial, r_trial):
+                v.destroy()
 
     def destroy(self) -> None:
         self.snes.destroy()

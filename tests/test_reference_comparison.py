@@ -38,15 +38,11 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import reference
-from fem_anim.forms.kinematics import deformation_gradient
-from fem_anim.forms.material import EXTRA_DATA
-from fem_anim.integrator import Integrator
 from fem_anim.mesh import mesh_from_arrays
 from fem_anim.output import VertexGather
 from fem_anim.problem import EnergyProblem
 from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation, solver_options
-from fem_anim.solver import Minimiser
+from fem_anim.simulation import Simulation
 
 pytestmark = pytest.mark.skipif(
     MPI.COMM_WORLD.size > 1, reason="serial: the numpy reference and the dof map are rank-local"
@@ -198,16 +194,10 @@ class Comparison:
         return csr[self.order][:, self.order]
 
     def elastic_forms(self):
-        """Elastic energy, its gradient and Hessian by ``ufl.derivative``, compiled once.
-
-        Rebuilt from the problem's own terms: the material's ``psi`` of ``F(u)``, its Lame
-        constants, elastic measure and per-quadrature-point data (corotated 3D).
-        """
+        """Elastic energy, its gradient and Hessian by ``ufl.derivative``, compiled once."""
         if self._elastic_forms is None:
             p = self.problem
-            extra = {EXTRA_DATA[q.function.name].keyword: q.function for q in p.quadrature_data}
-            energy = p.material.psi(deformation_gradient(p.u), p.mu, p.lmbda, **extra) \
-                * p.dx_elastic
+            energy = p.ufl_elastic
             gradient = ufl.derivative(energy, p.u, ufl.TestFunction(p.V))
             hessian = ufl.derivative(gradient, p.u, ufl.TrialFunction(p.V))
             self._elastic_forms = tuple(map(fem.form, (energy, gradient, hessian)))
@@ -376,29 +366,12 @@ def test_mass_and_gravity(comparison, d, mass):
 # --- 4. trajectories -----------------------------------------------------------------------------
 
 
-class ReferenceMeshSimulation(Simulation):
-    """A :class:`Simulation` on a given mesh instead of the scene's ``[mesh]``.
-
-    Sets the attributes :meth:`Simulation.step` and :meth:`Simulation.initial_state` use, as
-    ``Simulation.__init__`` does after building the mesh.
-    """
-
-    def __init__(self, scene, domain, cli_options: dict[str, str]):
-        self.scene = scene
-        self.comm = domain.mesh.comm
-        self.domain = domain
-        self.problem = EnergyProblem(scene, domain)
-        self.integrator = Integrator(scene["time"]["integrator"])
-        self.minimiser = Minimiser(self.problem, solver_options(scene, cli_options))
-        self.gather = VertexGather(domain, self.problem.V)
-
-
 def compare_trajectory(scene_dir, d: int, material: str, integrator: str,
                        mass: str = "consistent") -> None:
     """20 steps of the pinned beam on both sides; positions and displacements agree."""
     scene = write_scene(scene_dir, d, material, mass=mass, integrator=integrator, pinned=True)
     points, cells, domain = beam_mesh(d)
-    sim = ReferenceMeshSimulation(scene, domain, DOLFINX_NEWTON)
+    sim = Simulation(scene, domain.mesh.comm, DOLFINX_NEWTON, domain=domain)
     pinned = pinned_mask(points, d)
 
     # Both sides pin the same dofs: set_bc zeroes exactly the pinned entries.
