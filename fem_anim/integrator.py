@@ -66,6 +66,21 @@ class Integrator:
             return (4.0 * state.u - state.u_old) / 3.0 + h * (8.0 * state.v - 2.0 * state.v_old) / 9.0
         return state.u + h * state.v
 
+    def damping_anchor(self, h: float, state: State) -> tuple[float, np.ndarray]:
+        """(c, u_d) of the Rayleigh dissipation potential c/2 (u - u_d)^T C (u - u_d).
+
+        With v_{n+1} = (u - u_d)/tau for the scheme, c = w/tau (:mod:`forms.damping`):
+        newmark tau = h/2, u_d = u_n + h/2 v_n (v_{n+1} = 2 (u - u_n)/h - v_n);
+        bdf2 tau = 2h/3, u_d = (4 u_n - u_{n-1})/3; implicit Euler tau = h, u_d = u_n.
+        Symplectic Euler takes the damping implicitly, as implicit Euler does.
+        """
+        w = self.weight(h, state)
+        if self.name == "newmark":
+            return w / (0.5 * h), state.u + 0.5 * h * state.v
+        if self.name == "bdf2" and state.u_old is not None:
+            return w / (2.0 * h / 3.0), (4.0 * state.u - state.u_old) / 3.0
+        return w / h, state.u
+
     def update(self, h: float, state: State, u_new: np.ndarray, u_pred: np.ndarray) -> State:
         """The state after the step, given the minimiser ``u_new`` of the staged objective."""
         w = self.weight(h, state)

@@ -28,6 +28,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fem_anim.forms import damping as damping_forms
 from fem_anim.forms import gravity as gravity_forms
 from fem_anim.forms import inertia as inertia_forms
 from fem_anim.forms.integrator import SCHEMES, step_objective
@@ -47,6 +48,49 @@ JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-march=native"]}
 def default_quadrature_degree(degree: int) -> int:
     """Quadrature degree of the elastic term: exact for P1 (constant F), 2(k-1) for P_k."""
     return max(1, 2 * (degree - 1))
+
+
+@dataclass
+class PinMotion:
+    """A pin that follows a prescribed rigid path: an animated handle (scene data only).
+
+    The pinned rest points X move to c + R(omega t') (X - c) + v t' with t' = min(t, until),
+    R the rotation by omega t' about ``axis`` through ``center`` (2D: about z).
+    """
+
+    dofs: np.ndarray
+    X: np.ndarray
+    velocity: np.ndarray
+    omega: float
+    axis: np.ndarray
+    center: np.ndarray
+    until: float
+
+    @classmethod
+    def from_scene(cls, pin: dict, dofs: np.ndarray, X: np.ndarray) -> "PinMotion":
+        d = X.shape[1]
+        center = pin["center"] if pin["center"] is not None else \
+            0.5 * (np.asarray(pin["min"]) + np.asarray(pin["max"]))
+        axis = np.asarray(pin["axis"] if pin["axis"] is not None else [0.0, 0.0, 1.0], float)
+        velocity = pin["velocity"] if pin["velocity"] is not None else [0.0] * d
+        return cls(dofs, X, np.asarray(velocity, float), float(pin["angular_velocity"]),
+                   axis / np.linalg.norm(axis), np.asarray(center, float),
+                   np.inf if pin["until"] is None else float(pin["until"]))
+
+    def displacement(self, t: float) -> np.ndarray:
+        """Displacement of the pinned dofs at time ``t`` (Rodrigues' rotation formula)."""
+        t = min(t, self.until)
+        theta = self.omega * t
+        r = self.X - self.center
+        d = r.shape[1]
+        if d == 2:
+            c, s = np.cos(theta), np.sin(theta)
+            rotated = np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
+        else:
+            k = self.axis
+            rotated = (r * np.cos(theta) + np.cross(k, r) * np.sin(theta)
+                       + np.outer(r @ k, k) * (1.0 - np.cos(theta)))
+        return rotated - r + self.velocity * t
 
 
 @dataclass
@@ -100,6 +144,7 @@ class EnergyProblem:
         self.u_prev = fem.Function(V, name="previous_displacement")
         self.v = fem.Function(V, name="velocity")
         self.u_bc = fem.Function(V, name="pinned_displacement")
+        self.u_anchor = fem.Function(V, name="damping_anchor")
 
         mat = scene["material"]
         mu, lmbda = lame_parameters(mat["youngs_modulus"], mat["poisson_ratio"])
@@ -107,6 +152,7 @@ class EnergyProblem:
         self.lmbda = fem.Constant(mesh, PETSc.ScalarType(lmbda))
         self.rho = fem.Constant(mesh, PETSc.ScalarType(mat["density"]))
         self.weight = fem.Constant(mesh, PETSc.ScalarType(0.0))
+        self.damping_coefficient = fem.Constant(mesh, PETSc.ScalarType(0.0))
 
         dx = ufl.Measure("dx", domain=mesh)
         self.dx_elastic = dx(metadata={"quadrature_degree": self.quadrature_degree})
@@ -136,6 +182,13 @@ class EnergyProblem:
             potential = ufl.derivative(at_prev, self.u_prev, self.u)
         inertia = inertia_forms.inertia(self.u, self.u_pred, self.rho, self.dx_mass)
         objective = step_objective(inertia, potential, self.weight)
+        self.damping_force_form = None
+        if "damping" in scene.data:
+            objective += self._dissipation(self.u, self.u_anchor, self.damping_coefficient)
+            zero = ufl.as_vector([0.0] * d)
+            self.damping_force_form = fem.form(ufl.derivative(
+                self._dissipation(self.v, zero, 1.0), self.v, ufl.TestFunction(V)),
+                jit_params=JIT_OPTIONS)
         du, dv = ufl.TrialFunction(V), ufl.TestFunction(V)
         residual = ufl.derivative(objective, self.u, dv)
         jacobian = ufl.derivative(residual, self.u, du)
@@ -182,8 +235,16 @@ class EnergyProblem:
         psi = self.material.psi(F, self.mu, self.lmbda, **extra)
         return psi * self.dx_elastic
 
+    def _dissipation(self, u, anchor, coefficient):
+        cfg = self.scene["damping"]
+        return damping_forms.dissipation_potential(
+            u, anchor, coefficient, float(cfg["alpha"]), float(cfg["beta"]), self.rho, self.mu,
+            self.lmbda, self.dx_mass, self.dx_elastic)
+
     def _pins(self) -> list:
         bcs = []
+        self.moving_pins: list[PinMotion] = []
+        coordinates = self.V.tabulate_dof_coordinates()[:, : self.d]
         for i, pin in enumerate(self.scene["pin"]):
             lo = np.asarray(pin["min"], dtype=float)
             hi = np.asarray(pin["max"], dtype=float)
@@ -193,12 +254,21 @@ class EnergyProblem:
                 return np.all((x[:d].T >= lo) & (x[:d].T <= hi), axis=1)
 
             dofs = fem.locate_dofs_geometrical(self.V, inside)
+            coordinates_i = coordinates[dofs]
             owned = dofs[dofs < self.V.dofmap.index_map.size_local]
             if self.comm.allreduce(owned.size, op=MPI.SUM) == 0:
                 raise SceneError(f"pin[{i}] ({pin['name']}): the box min {pin['min']}, max "
                                  f"{pin['max']} contains no mesh vertex")
             bcs.append(fem.dirichletbc(self.u_bc, dofs))
+            if pin["velocity"] is not None or pin["angular_velocity"] != 0:
+                self.moving_pins.append(PinMotion.from_scene(pin, dofs, coordinates_i))
         return bcs
+
+    def set_pinned_displacement(self, t: float) -> None:
+        """Move the animated pins to their prescribed displacement at time ``t``."""
+        values = self.u_bc.x.array.reshape(-1, self.d)
+        for motion in self.moving_pins:
+            values[motion.dofs] = motion.displacement(t)
 
     # -- assembly -------------------------------------------------------------------------
     def set_state(self, x: PETSc.Vec) -> None:

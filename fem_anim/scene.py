@@ -90,10 +90,19 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "steps": Key(int, 60, lambda v: None if v >= 1 else "must be >= 1"),
     },
     "gravity": {"acceleration": Key(list, None, None, (2, 3))},
+    "damping": {
+        "alpha": Key(NUM, 0.0, _non_negative),
+        "beta": Key(NUM, 0.0, _non_negative),
+    },
     "pin": {
         "name": Key(str, "pin"),
         "min": Key(list, None, None, (2, 3)),
         "max": Key(list, None, None, (2, 3)),
+        "velocity": Key(list, None, None, (2, 3)),
+        "angular_velocity": Key(NUM, 0.0),
+        "axis": Key(list, None, None, (3,)),
+        "center": Key(list, None, None, (2, 3)),
+        "until": Key(NUM, None, _non_negative),
     },
     "solver": {
         "preset": Key(str, "cholesky"),
@@ -106,7 +115,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
 }
 #: Sections that exist only when a scene declares them (physical terms).
-OPTIONAL_SECTIONS = ("gravity",)
+OPTIONAL_SECTIONS = ("gravity", "damping")
 #: Sections that are arrays of tables (``[[pin]]``).
 ARRAY_SECTIONS = ("pin",)
 #: Keys without a default that a declared optional section must give.
@@ -291,6 +300,18 @@ def _check_consistency(data: dict[str, Any]) -> None:
         if any(a > b for a, b in zip(lo, hi)):
             raise SceneError(f"pin[{i}] ({pin['name']}) is an empty box: min {lo} exceeds "
                              f"max {hi}")
+        for key in ("velocity", "center"):
+            if pin[key] is not None and len(pin[key]) != d:
+                raise SceneError(f"pin[{i}].{key} must have {d} entries for mesh.dim = {d}, "
+                                 f"got {pin[key]}")
+        if pin["axis"] is not None:
+            if d == 2:
+                raise SceneError(f"pin[{i}].axis is for mesh.dim = 3 (2D rotations are about "
+                                 "the z axis)")
+            if not any(pin["axis"]):
+                raise SceneError(f"pin[{i}].axis must not be the zero vector")
+        if pin["angular_velocity"] != 0 and d == 3 and pin["axis"] is None:
+            raise SceneError(f"pin[{i}].axis is required with pin[{i}].angular_velocity")
     if data["element"]["degree"] == 2 and data["material"]["mass"] == "lumped":
         raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
                          "(row-sum lumping of P2 gives zero or negative vertex masses); use "

@@ -97,17 +97,25 @@ class Simulation:
         n = p.u.x.array.size
         state = State(u=np.zeros(n), v=np.zeros(n), a=np.zeros(n))
         if self.integrator.name == "newmark":
-            state.a = self._acceleration(state.u)
+            state.a = self._acceleration(state.u, state.v)
         return state
 
-    def _acceleration(self, u: np.ndarray) -> np.ndarray:
+    def _acceleration(self, u: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
+        """a = M^-1 (f(u) - C v), zero on pinned dofs (C: Rayleigh damping, if declared)."""
         p = self.problem
+        v = np.zeros_like(u) if v is None else v
         p.u.x.array[:] = u
         for data in p.quadrature_data:
             data.update()
         f = fem_petsc.assemble_vector(p.potential_gradient_form)
         f.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         f.scale(-1.0)
+        if p.damping_force_form is not None:  # M a_0 = f_0 - C v_0
+            p.v.x.array[:] = v
+            fem_petsc.assemble_vector(f_damp := f.duplicate(), p.damping_force_form)
+            f_damp.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            f.axpy(-1.0, f_damp)
+            f_damp.destroy()
         fem_petsc.set_bc(f, p.bcs, scale=0.0)
         M = fem_petsc.assemble_matrix(p.mass_form, p.bcs)
         M.assemble()
@@ -137,6 +145,11 @@ class Simulation:
         p.u_pred.x.array[:] = u_pred
         p.u_prev.x.array[:] = state.u
         p.weight.value = integ.weight(h, state)
+        if p.damping_force_form is not None:
+            c, anchor = integ.damping_anchor(h, state)
+            p.damping_coefficient.value = c
+            p.u_anchor.x.array[:] = anchor
+        p.set_pinned_displacement(state.time + h)
         p.u.x.array[:] = u_pred
         fem_petsc.set_bc(p.u.vector, p.bcs)
         p.u.vector.copy(p.x_work)
