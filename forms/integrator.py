@@ -23,8 +23,13 @@ rule) is second order and conserves the energy of linear systems; implicit Euler
 first order and dissipates; BDF2 is second order and mildly dissipative. Symplectic
 Euler is explicit: its objective is the quadratic 1/2 ||x - y||^2_M - h^2 f(x_n).x (one
 linear solve with M), and it is stable only for h < 2/omega_max, omega_max the highest
-natural frequency of the mesh (about c_p/element size, c_p = sqrt((lmbda + 2 mu)/rho)).
-It is a comparison baseline, not a production integrator.
+natural frequency of the discrete system, i.e. the largest generalised eigenvalue of
+K phi = omega^2 M phi. It grows like c_p/h_min (c_p = sqrt((lmbda + 2 mu)/rho), h_min the
+smallest element size) with a large mesh-dependent factor: measured 1254 rad/s (consistent
+mass) and 641 rad/s (lumped) on a 0.1 m tetrahedral bar with c_p = 11.6 m/s, i.e. about 11
+and 5.5 times c_p/h (tests/test_integrators.py computes it and checks the bound). It is a
+comparison baseline, not a production integrator. Rayleigh damping, when declared, is taken
+implicitly in every scheme (:mod:`forms.damping`).
 """
 
 from __future__ import annotations

@@ -217,3 +217,22 @@ def test_log_view_reaches_petsc(tmp_path):
                 tmp_path)
     assert r.returncode == 0, r.stderr
     assert "PETSc Performance Summary" in r.stdout and "SNESSolve" in r.stdout
+
+
+def test_second_run_compiles_nothing(tmp_path):
+    """Compiled forms are cached: running the same scene again adds no JIT module."""
+    env = clean_environment() | {"XDG_CACHE_HOME": str(tmp_path / "cache")}
+    args = fem_anim_command() + ["run", "-q", "--set", "time.steps=1", "--set",
+                                 "output.render=false", "--set", "mesh.element_size=0.1"]
+
+    def compiled() -> set[str]:
+        return {p.name for p in (tmp_path / "cache").rglob("*.so")}
+
+    for run in ("first", "second"):
+        r = subprocess.run(args + ["-o", str(tmp_path / run)], cwd=tmp_path, env=env,
+                           capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+        if run == "first":
+            first = compiled()
+            assert len(first) >= 4  # objective, residual, Jacobian, energies, elements
+    assert compiled() == first
