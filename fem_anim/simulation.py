@@ -150,15 +150,27 @@ class Simulation:
             p.damping_coefficient.value = c
             p.u_anchor.x.array[:] = anchor
         p.set_pinned_displacement(state.time + h)
-        p.u.x.array[:] = u_pred
-        fem_petsc.set_bc(p.u.vector, p.bcs)
-        p.u.vector.copy(p.x_work)
+        self._initial_guess(u_pred, state.u)
         stats = self.minimiser.solve(p.x_work, what=f"step {state.step + 1} "
                                                     f"(t = {state.time + h:.6g} s)")
         p.set_state(p.x_work)
         new = integ.update(h, state, p.u.x.array.copy(), u_pred)
         p.v.x.array[:] = new.v
         return new, stats
+
+    def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray) -> None:
+        """Start Newton from the predictor, or from u_n where g(predictor) is not finite.
+
+        A large predicted step can invert elements, where energies such as neo-Hookean's
+        are undefined; u_n with the new pin positions is then the safer start.
+        """
+        p = self.problem
+        for guess in (u_pred, u_last):
+            p.u.x.array[:] = guess
+            fem_petsc.set_bc(p.u.vector, p.bcs)
+            p.u.vector.copy(p.x_work)
+            if math.isfinite(p.objective(None, p.x_work)):
+                return
 
     # -- the run --------------------------------------------------------------------------
     def run(self, output_dir: Path | None = None, quiet: bool = False) -> RunResult:

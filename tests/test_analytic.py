@@ -184,7 +184,7 @@ SPIN_AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)  # 3D; 2D spins about z
 DRIFT = (0.3, -0.2, 0.1)  # m/s, the translation added to the rotation
 SPIN_DT = 0.05  # s
 SPIN_STEPS = 20  # 2 rad of rotation; the body stretches by ~20% and wobbles
-#: Linear momentum: exact up to round-off. Measured <= 8e-15 relative.
+#: Linear momentum: exact up to round-off. Measured <= 8e-15 relative to |p_0|.
 MOMENTUM_RTOL = 1e-12
 #: Conserved (Newmark) or balanced (implicit Euler) angular momentum, to the Newton tolerance
 #: (snes_rtol 1e-12) accumulated over the steps. Measured <= 5e-14 relative to |L_0|.
@@ -224,7 +224,7 @@ class Spin:
         return state
 
     def momenta(self, state, h: float) -> dict[str, np.ndarray]:
-        """p, L, Newmark's L~ and B(v, w) for the balance of implicit Euler (needs ``prev``)."""
+        """p, L and Newmark's L~ of a state, and M v (by node) for implicit Euler's balance."""
         d = self.d
         x = self.X + state.u.reshape(-1, d)
         a = state.a.reshape(-1, d)
@@ -246,10 +246,9 @@ class Spin:
         return history, velocities
 
 
-def max_relative(values, reference_value) -> float:
-    values = np.atleast_2d(np.asarray(values).reshape(len(values), -1))
-    reference_value = np.atleast_1d(reference_value)
-    return float(np.abs(values - reference_value).max() / np.abs(reference_value).max())
+def max_relative(history: np.ndarray, initial: np.ndarray) -> float:
+    """``max_n |y_n - y_0| / |y_0|`` (max norms) of a vector or (2D) scalar history."""
+    return float(np.abs(history - initial).max() / np.abs(initial).max())
 
 
 SPIN_CASES = [(d, material, integrator, 1) for d in (2, 3) for material in ("neohookean", "stvk")
@@ -277,22 +276,23 @@ def test_free_spinning_body_momenta(tmp_path, d, material, integrator, degree):
         drift_tilde = max_relative(L_tilde, L_tilde[0])
         assert drift_tilde <= ANGULAR_RTOL, f"L~ drifts by {drift_tilde:.2e}"
         # L itself is not an invariant of the trapezoidal rule: it oscillates by O(h^2)
-        # (measured up to 1.8% here) but, L - L~ being h^2/4 B(a, v), does not drift.
+        # (measured up to 1.9% in 2D, 0.7% in 3D) but, L - L~ being h^2/4 B(a, v), does not
+        # drift.
         assert 1e-4 < drift_L < 0.05, f"L varies by {drift_L:.2e}"
     else:
         # discrete balance L_{n+1} - L_n = h B(v_{n+1}, v_n) = h sum_i v_{n+1,i} x (M v_n)_i
         balance = [SPIN_DT * cross(v_next, m["Mv"]).sum(axis=0)
-                   for v_next, m in zip(velocities[1:], history[:-1])]
-        error = np.abs(np.diff(L, axis=0) - np.array(balance).reshape(np.diff(L, axis=0).shape))
+                   for v_next, m in zip(velocities[1:], history[:-1], strict=True)]
+        error = np.abs(np.diff(L, axis=0) - np.array(balance))
         assert error.max() <= ANGULAR_RTOL * scale, \
             f"angular momentum balance off by {error.max() / scale:.2e}"
         # ... and the balance is a real loss: implicit Euler spins the body down
-        # (measured: 13% of L in 10 steps in 3D, 63% in 20 steps in 2D).
+        # (measured over the 20 steps: 11% of |L| lost in 3D, 64% in 2D).
         assert np.linalg.norm(L[-1]) < 0.95 * np.linalg.norm(L0)
     spin.sim.minimiser.destroy()
 
 
-# --- 2. patch tests ---------------------------------------------------------------------------------
+# --- 2. patch tests -------------------------------------------------------------------------------
 
 PATCH_LENGTHS = {2: (1.0, 0.5), 3: (1.0, 0.5, 0.5)}
 PATCH_DIVISIONS = {2: (4, 2), 3: (4, 2, 2)}
@@ -301,10 +301,11 @@ MATERIALS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
              "corotated_lagged")
 #: Energies: sums of equal cell values in another order; measured <= 1e-14 relative.
 ENERGY_RTOL = 1e4 * EPS
-#: Nodal forces relative to the largest one. Measured <= 9e-15 for P1 and 2D P2; 3D P2
-#: <= 6e-13: the cancellation at interior P2 nodes sums ~20 cell terms much larger than the
-#: result, and basix's default degree-2 tetrahedron rule integrates polynomials only to
-#: ~5e-15 relative (the degree-4 rule: 6e-16).
+#: Nodal forces relative to the largest one (affine patch), or to mu h^(d-1), the nodal force
+#: of a unit strain on cells of size h (rigid motion). Measured <= 5e-15 for P1; for P2
+#: <= 1.3e-13 in 2D and <= 3.1e-13 in 3D, where the force at an interior P2 node is a sum of
+#: cell terms much larger than the result (in 3D the default degree-2 tetrahedron rule,
+#: exact only to ~5e-15, adds to it: the degree-4 rule gives 3-5 times less).
 FORCE_RTOL = {1: 1e4 * EPS, 2: 1e5 * EPS}
 
 
@@ -374,10 +375,9 @@ def test_affine_patch(patch_problem, d, degree, material):
     assert boundary <= FORCE_RTOL[degree], f"nodal forces differ from P(A) N by {boundary:.2e}"
 
 
-#: Rigid motion: energy relative to mu vol (the energy of a unit strain), forces relative to
-#: mu h^(d-1) (h the cell size: the nodal force of a unit strain). Measured <= 3e-14 and
-#: <= 3e-15 for the rotation-invariant materials; linear gives ~0.1 and ~0.1.
-RIGID_RTOL = 1e4 * EPS
+#: Rigid motion: energy relative to mu vol, the energy of a unit strain. Measured <= 3e-16
+#: for the rotation-invariant materials; ``linear`` gives 0.28 (and forces >= 0.38 mu h^(d-1)).
+RIGID_ENERGY_RTOL = 1e4 * EPS
 
 
 @pytest.mark.parametrize("material", MATERIALS)
@@ -397,11 +397,11 @@ def test_rigid_motion_patch(patch_problem, d, degree, material):
     if material == "linear":  # small strain sym(R) - I != 0: rotations cost energy
         assert energy > 1e-2 and force > 1e-2
     else:
-        assert abs(energy) <= RIGID_RTOL, f"rigid motion energy {energy:.2e} mu vol"
-        assert force <= RIGID_RTOL, f"rigid motion forces {force:.2e} mu h^(d-1)"
+        assert abs(energy) <= RIGID_ENERGY_RTOL, f"rigid motion energy {energy:.2e} mu vol"
+        assert force <= FORCE_RTOL[degree], f"rigid motion forces {force:.2e} mu h^(d-1)"
 
 
-# --- 3. the harmonic oscillator, mode by mode ---------------------------------------------------
+# --- 3. the harmonic oscillator, mode by mode -----------------------------------------------------
 
 BAR_LENGTHS = {2: (1.0, 0.2), 3: (1.0, 0.2, 0.2)}
 BAR_DIVISIONS = {2: (6, 2), 3: (6, 2, 2)}
@@ -409,10 +409,14 @@ WALL = {2: ((-1e-6, -1.0), (1e-6, 1.0)), 3: ((-1e-6, -1.0, -1.0), (1e-6, 1.0, 1.
 OMEGA_H = 0.5  # omega_1 h of the lowest mode; the second mode has omega h >= 4 x that
 MODAL_STEPS = {"newmark": 20, "implicit_euler": 10}
 MODAL_AMPLITUDE = 1.0e-3  # m (the material is linear: any amplitude is exact)
-#: Per-step amplification factors: measured <= 3e-13 (relative).
+#: Per-step amplification factors, relative: measured <= 2e-12 for Newmark; for implicit Euler
+#: <= 1.2e-10, in the last steps of the second mode, decayed to 1e-4 of its initial amplitude
+#: (round-off of u relative to what is left of the mode; <= 2e-13 while it is large).
 FACTOR_RTOL = 1e-8
-#: Newmark's modal energy: measured <= 1e-14 relative.
+#: Newmark's modal energy: measured <= 2.3e-12 relative.
 MODAL_ENERGY_RTOL = 1e-10
+#: Displacement outside the two modes, relative to their amplitude: measured <= 4e-13.
+OFF_MODES_RTOL = 1e-10
 
 
 class ModalBar:
@@ -522,4 +526,4 @@ def test_modal_oscillator(modal_bar, d, mass, integrator):
                                    rtol=FACTOR_RTOL)
         np.testing.assert_allclose(phase, np.arctan(theta) * np.ones_like(phase),
                                    rtol=FACTOR_RTOL)
-    assert off <= 1e-10, f"other modes excited: {off:.2e}"
+    assert off <= OFF_MODES_RTOL, f"other modes excited: {off:.2e}"

@@ -236,3 +236,21 @@ def test_second_run_compiles_nothing(tmp_path):
             first = compiled()
             assert len(first) >= 4  # objective, residual, Jacobian, energies, elements
     assert compiled() == first
+
+
+def test_2d_beam_survives_an_inverting_predictor(tmp_path):
+    """2D neo-Hookean beam: at step 56 the Newmark predictor inverts elements (g = NaN).
+
+    Newton then starts from the last state instead, and the run completes with finite
+    energies (before that fallback it stopped with DIVERGED_FNORM_NAN at step 56).
+    """
+    out = tmp_path / "plate"
+    assert main(["run", "-o", str(out), "-q", "--set", "mesh.dim=2",
+                 "--set", "mesh.size=[1.0, 0.2]", "--set", "gravity.acceleration=[0, -9.81]",
+                 "--set", "pin.0.min=[-0.001, -1]", "--set", "pin.0.max=[0.001, 1]",
+                 "--set", "output.render=false"]) == 0
+    rows = read_stats(out / "stats.csv")
+    assert len(rows) == 60 and all(math.isfinite(r["total_energy"]) for r in rows)
+    final = meshio.read(out / "final.vtu")
+    assert list(final.cells_dict) == ["triangle"]
+    assert final.point_data["displacement"][:, 1].min() < -0.5
