@@ -179,11 +179,11 @@ def rotation(d: int, angle: float) -> np.ndarray:
 
 SPIN_LENGTHS = {2: (1.0, 0.25), 3: (1.0, 0.25, 0.25)}
 SPIN_DIVISIONS = {2: (4, 2), 3: (4, 2, 2)}
-SPIN_OMEGA = 2.0  # rad/s: the centrifugal strain rho omega^2 L^2 / E is about 0.1
+SPIN_OMEGA = 2.0  # rad/s: centrifugal strain rho omega^2 l^2 / E = 0.1 (l the half-length)
 SPIN_AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)  # 3D; 2D spins about z
 DRIFT = (0.3, -0.2, 0.1)  # m/s, the translation added to the rotation
 SPIN_DT = 0.05  # s
-SPIN_STEPS = 20  # 2 rad of rotation; the body stretches by ~20% and wobbles
+SPIN_STEPS = 20  # 2 rad of rotation, while the body stretches and wobbles
 #: Linear momentum: exact up to round-off. Measured <= 8e-15 relative to |p_0|.
 MOMENTUM_RTOL = 1e-12
 #: Conserved (Newmark) or balanced (implicit Euler) angular momentum, to the Newton tolerance
