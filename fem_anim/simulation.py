@@ -97,10 +97,10 @@ class Simulation:
         n = p.u.x.array.size
         state = State(u=np.zeros(n), v=np.zeros(n), a=np.zeros(n))
         if self.integrator.name == "newmark":
-            state.a = self._acceleration(state.u, state.v)
+            state.a = self.acceleration(state.u, state.v)
         return state
 
-    def _acceleration(self, u: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
+    def acceleration(self, u: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """a = M^-1 (f(u) - C v), zero on pinned dofs (C: Rayleigh damping, if declared)."""
         p = self.problem
         v = np.zeros_like(u) if v is None else v

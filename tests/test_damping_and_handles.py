@@ -50,7 +50,7 @@ def bar(tmp_path, integrator="newmark", alpha=None, beta=None, extra=""):
     state.v = np.zeros_like(state.u)
     state.v.reshape(-1, 3)[:, 2] = 0.5 * X[:, 0] ** 2  # a bending-like initial velocity
     if sim.integrator.name == "newmark":
-        state.a = sim._acceleration(state.u, state.v)
+        state.a = sim.acceleration(state.u, state.v)
     return sim, state
 
 

@@ -196,7 +196,7 @@ class ModalProblem:
         state.u[:] = AMPLITUDE * self.phi[:, 0]
         state.v[:] = AMPLITUDE * self.omega[1] * self.phi[:, 1]
         if sim.integrator.name == "newmark":
-            state.a = sim._acceleration(state.u)
+            state.a = sim.acceleration(state.u)
         return state
 
     def exact(self, t: float) -> np.ndarray:
