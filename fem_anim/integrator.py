@@ -63,7 +63,8 @@ class Integrator:
         if self.name == "newmark":
             return state.u + h * state.v + 0.25 * h * h * state.a  # seed eq. 3
         if self.name == "bdf2" and state.u_old is not None:
-            return (4.0 * state.u - state.u_old) / 3.0 + h * (8.0 * state.v - 2.0 * state.v_old) / 9.0
+            return ((4.0 * state.u - state.u_old) / 3.0
+                    + h * (8.0 * state.v - 2.0 * state.v_old) / 9.0)
         return state.u + h * state.v
 
     def damping_anchor(self, h: float, state: State) -> tuple[float, np.ndarray]:

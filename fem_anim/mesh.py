@@ -112,9 +112,8 @@ def _gmsh_arrays(model, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices, simplices and physical-group markers of a meshed gmsh model."""
     tags, coords, _ = model.mesh.getNodes()
     points = coords.reshape(-1, 3)[:, :dim]
-    order = np.argsort(tags)
-    index = np.empty(int(tags.max()) + 1, dtype=np.int64)
-    index[tags[order]] = np.arange(tags.size)[order]
+    index = np.empty(int(tags.max()) + 1, dtype=np.int64)  # gmsh node tag -> row of points
+    index[tags] = np.arange(tags.size)
     etype = {2: 2, 3: 4}[dim]  # gmsh: 3-node triangle, 4-node tetrahedron
     cells_list, markers_list = [], []
     for _, group in model.getPhysicalGroups(dim):

@@ -108,14 +108,12 @@ class StatsWriter:
 
     def __init__(self, path: Path, comm: MPI.Comm):
         self.rank0 = comm.rank == 0
-        self.rows: list[dict] = []
         if self.rank0:
             self._file = open(path, "w", newline="")
             self._writer = csv.DictWriter(self._file, fieldnames=STATS_COLUMNS)
             self._writer.writeheader()
 
     def write(self, row: dict) -> None:
-        self.rows.append(row)
         if self.rank0:
             self._writer.writerow({k: row[k] for k in STATS_COLUMNS})
             self._file.flush()

@@ -230,7 +230,7 @@ class EnergyProblem:
                              if k in compiled}
 
         self.bcs = self._pins()
-        self.x_work = self.u.vector.duplicate()
+        self.x_work = compat.petsc_vec(self.u).duplicate()
 
     # -- construction helpers -------------------------------------------------------------
     def _elastic_energy(self, u):
@@ -291,8 +291,9 @@ class EnergyProblem:
     # -- assembly -------------------------------------------------------------------------
     def set_state(self, x: PETSc.Vec) -> None:
         """Copy a solver iterate into ``u`` (with ghosts) and refresh quadrature data."""
-        x.copy(self.u.vector)
-        self.u.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        u = compat.petsc_vec(self.u)
+        x.copy(u)
+        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         for data in self.quadrature_data:
             data.update()
 

@@ -251,11 +251,10 @@ def _validate_table(section: str, table: Any, keys: dict[str, Key], where: str) 
 
 
 def _validate(raw: Mapping[str, Any]) -> dict[str, Any]:
+    known = ["name"] + [section for section in SCHEMA if section]
     for name in raw:
-        if name not in SCHEMA or name == "":
-            if name != "name":
-                raise SceneError(f"unknown section or key {name!r} (known: "
-                                 f"{', '.join(['name'] + [s for s in SCHEMA if s])})")
+        if name not in known:
+            raise SceneError(f"unknown section or key {name!r} (known: {', '.join(known)})")
     data = _validate_table("", {"name": raw["name"]} if "name" in raw else {}, SCHEMA[""], "")
     for section, keys in SCHEMA.items():
         if not section:

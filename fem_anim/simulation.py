@@ -19,6 +19,7 @@ from petsc4py import PETSc
 
 from dolfinx.fem import petsc as fem_petsc
 
+from . import compat
 from .errors import ConvergenceError, FemAnimError
 from .integrator import Integrator, State
 from .mesh import SimplexMesh, build_mesh
@@ -167,8 +168,9 @@ class Simulation:
         p = self.problem
         for guess in (u_pred, u_last):
             p.u.x.array[:] = guess
-            fem_petsc.set_bc(p.u.vector, p.bcs)
-            p.u.vector.copy(p.x_work)
+            u = compat.petsc_vec(p.u)
+            fem_petsc.set_bc(u, p.bcs)
+            u.copy(p.x_work)
             if math.isfinite(p.objective(None, p.x_work)):
                 return
 

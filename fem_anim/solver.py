@@ -121,8 +121,7 @@ class Minimiser:
             return R.CONVERGED_FNORM_RELATIVE
         if it > 0:
             f_prev, g_prev = self._history[-2]
-            resolution = ROUNDOFF_ULPS * np.finfo(float).eps * max(abs(g), abs(g_prev))
-            if fnorm > 0.5 * f_prev and abs(g_prev - g) <= resolution:
+            if fnorm > 0.5 * f_prev and abs(g_prev - g) <= _resolution(g, g_prev):
                 return ROUNDOFF_REASON
         if it >= max_it:
             return R.DIVERGED_MAX_IT
@@ -144,7 +143,7 @@ class Minimiser:
         decrement = 0.5 * abs(r.dot(step))
         r.destroy()
         step.destroy()
-        return decrement <= ROUNDOFF_ULPS * np.finfo(float).eps * max(abs(g), abs(g0))
+        return decrement <= _resolution(g, g0)
 
     def _polish(self, x: PETSc.Vec, max_steps: int = 5) -> tuple[int, float]:
         """Full Newton steps judged by the residual, where g can no longer judge them.
@@ -191,6 +190,11 @@ class Minimiser:
         self.snes.destroy()
         self.A.destroy()
         self.b.destroy()
+
+
+def _resolution(*values: float) -> float:
+    """The smallest change of the objective distinguishable from round-off near ``values``."""
+    return ROUNDOFF_ULPS * np.finfo(float).eps * max(abs(v) for v in values)
 
 
 def _reason_name(enum, value: int) -> str:
