@@ -19,12 +19,12 @@ bdf2              4/3 x_n - 1/3 x_{n-1} + 8h/9 v_n - 2h/9 v_{n-1}     4h^2/9  3/
 symplectic_euler  x_n + h v_n, E linearised at x_n (explicit)         h^2     (x - x_n)/h
 ================  =================================================  ======  =================
 
-with x^ = 4/3 x_n - 1/3 x_{n-1}. For Newmark a_{n+1} = (x - y)/w follows from
-stationarity. Newmark (the trapezoidal rule) is second order and conserves the energy of linear systems; implicit Euler is
-first order and dissipates; BDF2 is second order and mildly dissipative. Symplectic
-Euler is explicit: its objective is the quadratic 1/2 ||x - y||^2_M - h^2 f(x_n).x (one
-linear solve with M), and it is stable only for h < 2/omega_max, omega_max the highest
-natural frequency of the discrete system, i.e. the largest generalised eigenvalue of
+with x^ = 4/3 x_n - 1/3 x_{n-1}. For Newmark a_{n+1} = (x - y)/w follows from stationarity.
+Newmark (the trapezoidal rule) is second order and conserves the energy of linear systems;
+implicit Euler is first order and dissipates; BDF2 is second order and mildly dissipative.
+Symplectic Euler is explicit: its objective is the quadratic 1/2 ||x - y||^2_M - h^2
+f(x_n).x (one linear solve with M), and it is stable only for h < 2/omega_max, omega_max the
+highest natural frequency of the discrete system, i.e. the largest generalised eigenvalue of
 K phi = omega^2 M phi. It grows like c_p/h_min (c_p = sqrt((lmbda + 2 mu)/rho), h_min the
 smallest element size) with a large mesh-dependent factor: measured 1254 rad/s (consistent
 mass) and 641 rad/s (lumped) on a 0.1 m tetrahedral bar with c_p = 11.6 m/s, i.e. about 11
