@@ -18,6 +18,7 @@ are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins)
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import basix
@@ -37,6 +38,7 @@ from fem_anim.forms.lame import lame_parameters
 from fem_anim.forms.material import EXTRA_DATA, get_material
 
 from . import compat
+from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh
 
@@ -111,24 +113,25 @@ class PinMotion:
 
 @dataclass
 class QuadratureData:
-    """Per-quadrature-point data a material's ``psi`` takes, recomputed from the current F.
+    """Per-quadrature-point data computed in numpy from a compiled UFL expression.
 
-    Holds a quadrature-space Function and the compiled expression of F at the points of
-    the elastic quadrature rule; :meth:`update` evaluates F on every local cell (owned
-    and ghost, so no communication is needed) and applies the numpy map of
-    :data:`forms.material.EXTRA_DATA` in one vectorised call.
+    Holds a quadrature-space Function and a compiled expression (F, or the material
+    tangent) at the points of the elastic quadrature rule; :meth:`update` evaluates it on
+    every local cell (owned and ghost, so no communication is needed) and applies a numpy
+    map in one vectorised call: the extra data of :data:`forms.material.EXTRA_DATA`, or
+    the PSD projection of :func:`fem_anim.hessian.project_psd`.
     """
 
     function: fem.Function
-    F_expression: fem.Expression
+    expression: fem.Expression
     evaluate: object
     num_cells: int
-    d: int
+    value_shape: tuple[int, ...]
 
     def update(self) -> None:
         cells = np.arange(self.num_cells, dtype=np.int32)
-        F = self.F_expression.eval(cells).reshape(-1, self.d, self.d)
-        values = self.evaluate(F).reshape(self.num_cells, -1)
+        values = self.expression.eval(cells).reshape(-1, *self.value_shape)
+        values = self.evaluate(values).reshape(self.num_cells, -1)
         dofs = self.function.function_space.dofmap.list.array.reshape(self.num_cells, -1)
         bs = self.function.function_space.dofmap.bs
         target = self.function.x.array.reshape(-1, bs)
@@ -180,6 +183,7 @@ class EnergyProblem:
         self.dx_load = self.dx_mass
 
         self.quadrature_data: list[QuadratureData] = []
+        self._extra: dict = {}  # displacement Function -> the material's quadrature data
         elastic_u = self._elastic_energy(self.u)
         gravity_u = None
         self.g = None
@@ -196,20 +200,34 @@ class EnergyProblem:
                 at_prev += gravity_forms.gravity_potential(self.u_prev, self.rho, self.g,
                                                            self.dx_load)
             potential = ufl.derivative(at_prev, self.u_prev, self.u)
-        inertia = inertia_forms.inertia(self.u, self.u_pred, self.rho, self.dx_mass)
-        objective = step_objective(inertia, potential, self.weight)
+        convex = inertia_forms.inertia(self.u, self.u_pred, self.rho, self.dx_mass)
         du, dv = ufl.TrialFunction(V), ufl.TestFunction(V)
         ufl_forms = {}
         if "damping" in scene.data:
-            objective += self._dissipation(self.u, self.u_anchor, self.damping_coefficient)
+            convex += self._dissipation(self.u, self.u_anchor, self.damping_coefficient)
             zero = ufl.as_vector([0.0] * d)
             ufl_forms["damping_force"] = ufl.derivative(
                 self._dissipation(self.v, zero, 1.0), self.v, dv)
+        objective = step_objective(convex, potential, self.weight)
         residual = ufl.derivative(objective, self.u, dv)
+        jacobian = ufl.derivative(residual, self.u, du)
+        solver = scene["solver"]
+        self.tangent_data = None
+        if solver["hessian"] == "project" and not self.scheme.explicit:
+            # the convex terms exactly, the elastic one projected (gravity is linear)
+            jacobian = ufl.derivative(ufl.derivative(convex, self.u, dv), self.u, du) + \
+                self._projected_elastic_hessian(du, dv)
+        self.filter_inversion = solver["inversion_filter"]
+        if self.filter_inversion is None:
+            self.filter_inversion = self.material.requires_positive_J
+        self.det_data = None
+        if self.filter_inversion:
+            self.det_data = self._quadrature_data(
+                "det_F", ufl.det(deformation_gradient(self.u)), lambda J: J, (), ())
         ufl_forms |= {
             "objective": objective,
             "residual": residual,
-            "jacobian": ufl.derivative(residual, self.u, du),
+            "jacobian": jacobian,
             "kinetic": inertia_forms.kinetic_energy(self.v, self.rho, self.dx_mass),
             "elastic": elastic_u,
             "mass": self.rho * ufl.inner(du, dv) * self.dx_mass,
@@ -219,6 +237,7 @@ class EnergyProblem:
             ufl_forms["gravity"] = gravity_u
         self.ufl_objective = objective
         self.ufl_elastic = elastic_u
+        self.assembly_s = 0.0  # wall time spent assembling (objective, residual, Jacobian)
         compiled = compile_forms(ufl_forms)
         self.objective_form = compiled["objective"]
         self.residual_form = compiled["residual"]
@@ -233,25 +252,55 @@ class EnergyProblem:
         self.x_work = compat.petsc_vec(self.u).duplicate()
 
     # -- construction helpers -------------------------------------------------------------
+    def _quadrature_points(self) -> np.ndarray:
+        """Reference points of the elastic quadrature rule (the rule FFCx uses)."""
+        cell = self.domain.mesh.topology.cell_name()
+        points, _ = basix.make_quadrature(basix.quadrature.string_to_type("default"),
+                                          basix.cell.string_to_type(cell),
+                                          self.quadrature_degree)
+        return points
+
+    def _quadrature_data(self, name: str, expression, evaluate, in_shape, out_shape):
+        """A quadrature Function filled by ``evaluate(expression)`` on every update."""
+        Q = compat.quadrature_space(self.domain.mesh, self.quadrature_degree, out_shape)
+        index_map = self.domain.mesh.topology.index_map(self.d)
+        return QuadratureData(fem.Function(Q, name=name),
+                              fem.Expression(expression, self._quadrature_points(),
+                                             jit_params=JIT_OPTIONS),
+                              evaluate, index_map.size_local + index_map.num_ghosts, in_shape)
+
+    def _psi(self, u, F=None):
+        """The material's psi of F(u) (or of a given F), with its quadrature data."""
+        F = deformation_gradient(u) if F is None else F
+        if u not in self._extra:
+            self._extra[u] = {}
+            for key in self.material.needs(self.d):
+                data = EXTRA_DATA[key]
+                q = self._quadrature_data(key, deformation_gradient(u), data.evaluate,
+                                          (self.d, self.d), data.value_shape(self.d))
+                self.quadrature_data.append(q)
+                self._extra[u][data.keyword] = q.function
+        return self.material.psi(F, self.mu, self.lmbda, **self._extra[u])
+
     def _elastic_energy(self, u):
-        F = deformation_gradient(u)
-        extra = {}
-        for key in self.material.needs(self.d):
-            data = EXTRA_DATA[key]
-            Q = compat.quadrature_space(self.domain.mesh, self.quadrature_degree,
-                                        data.value_shape(self.d))
-            function = fem.Function(Q, name=key)
-            cell = self.domain.mesh.topology.cell_name()
-            points, _ = basix.make_quadrature(basix.quadrature.string_to_type("default"),
-                                              basix.cell.string_to_type(cell),
-                                              self.quadrature_degree)
-            index_map = self.domain.mesh.topology.index_map(self.d)
-            self.quadrature_data.append(QuadratureData(
-                function, fem.Expression(F, points, jit_params=JIT_OPTIONS), data.evaluate,
-                index_map.size_local + index_map.num_ghosts, self.d))
-            extra[data.keyword] = function
-        psi = self.material.psi(F, self.mu, self.lmbda, **extra)
-        return psi * self.dx_elastic
+        return self._psi(u) * self.dx_elastic
+
+    def _projected_elastic_hessian(self, du, dv):
+        """w int grad(v) : A+ : grad(du), A+ the PSD projection of d^2 psi/dF^2."""
+        d = self.d
+        Fv = ufl.variable(deformation_gradient(self.u))
+        tangent = ufl.diff(ufl.diff(self._psi(self.u, Fv), Fv), Fv)
+        flat = ufl.as_matrix([[tangent[i, j, k, m] for k in range(d) for m in range(d)]
+                              for i in range(d) for j in range(d)])
+        self.tangent_data = self._quadrature_data(
+            "projected_tangent", flat, project_psd, (d * d, d * d), (d * d, d * d))
+        A = self.tangent_data.function  # row i*d + j, column k*d + m, like `flat`
+
+        def flatten(G):
+            return ufl.as_vector([G[i, j] for i in range(d) for j in range(d)])
+
+        return self.weight * ufl.inner(flatten(ufl.grad(dv)), ufl.dot(A, flatten(ufl.grad(du)))
+                                       ) * self.dx_elastic
 
     def _dissipation(self, u, anchor, coefficient):
         cfg = self.scene["damping"]
@@ -301,13 +350,30 @@ class EnergyProblem:
         """A scalar form summed over all ranks."""
         return self.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
 
+    def min_det_F(self) -> float:
+        """Smallest det F over the quadrature points of all ranks, for the current u."""
+        self.det_data.update()
+        local = self.det_data.function.x.array
+        return self.comm.allreduce(local.min() if local.size else np.inf, op=MPI.MIN)
+
     def objective(self, snes, x: PETSc.Vec) -> float:
-        """g(x) for the SNES line search and trust region (STYLE rule 7)."""
+        """g(x) for the SNES line search and trust region (STYLE rule 7).
+
+        With the inversion filter on, a state where some det F <= 0 has g = +inf: the
+        line search never accepts it (the energy is infinite there, not NaN).
+        """
+        start = time.perf_counter()
         self.set_state(x)
-        return self.assemble_scalar(self.objective_form)
+        if self.filter_inversion and not self.min_det_F() > 0.0:
+            value = np.inf
+        else:
+            value = self.assemble_scalar(self.objective_form)
+        self.assembly_s += time.perf_counter() - start
+        return value
 
     def residual(self, snes, x: PETSc.Vec, b: PETSc.Vec) -> None:
         """grad g(x), with pinned rows replaced by x - u_bc."""
+        start = time.perf_counter()
         self.set_state(x)
         with b.localForm() as b_local:
             b_local.set(0.0)
@@ -315,13 +381,21 @@ class EnergyProblem:
         fem_petsc.apply_lifting(b, [self.jacobian_form], bcs=[self.bcs], x0=[x], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fem_petsc.set_bc(b, self.bcs, x, -1.0)
+        self.assembly_s += time.perf_counter() - start
 
     def jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
-        """Hessian of g at x (line-search trials may have left another state in u)."""
+        """Hessian of g at x (exact, or with the elastic part projected: ``solver.hessian``).
+
+        Line-search trials may have left another state in u, so x is set first.
+        """
+        start = time.perf_counter()
         self.set_state(x)
+        if self.tangent_data is not None:
+            self.tangent_data.update()
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.jacobian_form, self.bcs)
         A.assemble()
+        self.assembly_s += time.perf_counter() - start
 
     def create_matrix(self) -> PETSc.Mat:
         """The Jacobian matrix, sparsity and preallocation built once."""

@@ -28,6 +28,7 @@ MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohooke
                    "corotated_lagged")
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 MESH_SHAPES = ("box", "file")
+NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
 MAX_MAGNITUDE = 1.0e150  # larger values are taken as a typo or an attack, not physics
 
 
@@ -106,6 +107,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "solver": {
         "preset": Key(str, "cholesky"),
+        "method": Key(str, "newton", _one_of(NONLINEAR_METHODS)),
+        "stopping": Key(str, "norm", _one_of(("norm", "decrement"))),
+        "decrement_tol": Key(NUM, 1e-14, _positive),
+        "hessian": Key(str, "exact", _one_of(("exact", "shift", "project"))),
+        "inversion_filter": Key(bool, None),
         "petsc": Key(dict, {}),
     },
     "output": {
@@ -315,6 +321,10 @@ def _check_consistency(data: dict[str, Any]) -> None:
         raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
                          "(row-sum lumping of P2 gives zero or negative vertex masses); use "
                          "\"consistent\"")
+    if data["solver"]["hessian"] != "exact" and data["solver"]["method"] not in (
+            "newton", "trust_region"):
+        raise SceneError(f"solver.hessian = \"{data['solver']['hessian']}\" modifies Newton's "
+                         f"Hessian; solver.method = \"{data['solver']['method']}\" uses none")
     if not isinstance(data["solver"]["petsc"], dict):
         raise SceneError("solver.petsc must be a table of PETSc options")
 

@@ -28,14 +28,14 @@ from .petsc_options import flatten_options, merge_options
 from .presets import NEWTON_DEFAULTS, preset_options
 from .problem import EnergyProblem
 from .progress import Progress
-from .solver import Minimiser, SolveStats
+from .solver import NONLINEAR_METHODS, Minimiser, SolveStats
 
 __all__ = ["Simulation", "RunResult", "solver_options"]
 
 
 def solver_options(scene, cli_options: dict[str, str] | None = None,
                    preset: str | None = None) -> dict[str, str]:
-    """Merged PETSc options: defaults < preset < scene ``[solver.petsc]`` < command line.
+    """Merged PETSc options: defaults < method < preset < scene ``[solver.petsc]`` < command line.
 
     A preset's ``pc_*`` options describe its preconditioner; when the scene or the command
     line chooses another ``pc_type``, they are dropped with it (``-pc_type icc`` on top of
@@ -54,7 +54,10 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
     if above.get("pc_type", layer.get("pc_type")) != layer.get("pc_type"):
         # a preset's pc_* options belong to its preconditioner: drop them with it
         layer = {k: v for k, v in layer.items() if not k.startswith("pc_")}
-    return merge_options(NEWTON_DEFAULTS, layer, above)
+    method = NONLINEAR_METHODS[scene["solver"]["method"]]
+    if scene["solver"]["hessian"] == "shift":
+        layer = layer | {"mat_mumps_icntl_13": "1"}  # exact inertia from MUMPS in parallel
+    return merge_options(NEWTON_DEFAULTS, method, layer, above)
 
 
 @dataclass
@@ -88,7 +91,7 @@ class Simulation:
         self.domain = domain if domain is not None else build_mesh(comm, scene)
         self.problem = EnergyProblem(scene, self.domain)
         self.integrator = Integrator(scene["time"]["integrator"])
-        self.minimiser = Minimiser(self.problem, options)
+        self.minimiser = Minimiser(self.problem, options, settings=scene["solver"])
         self.gather = VertexGather(self.domain, self.problem.V)
 
     # -- state ----------------------------------------------------------------------------
@@ -151,28 +154,51 @@ class Simulation:
             p.damping_coefficient.value = c
             p.u_anchor.x.array[:] = anchor
         p.set_pinned_displacement(state.time + h)
-        self._initial_guess(u_pred, state.u)
-        stats = self.minimiser.solve(p.x_work, what=f"step {state.step + 1} "
-                                                    f"(t = {state.time + h:.6g} s)")
+        what = f"step {state.step + 1} (t = {state.time + h:.6g} s)"
+        self._initial_guess(u_pred, state.u, what)
+        stats = self.minimiser.solve(p.x_work, what=what)
         p.set_state(p.x_work)
         new = integ.update(h, state, p.u.x.array.copy(), u_pred)
         p.v.x.array[:] = new.v
         return new, stats
 
-    def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray) -> None:
-        """Start Newton from the predictor, or from u_n where g(predictor) is not finite.
+    def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> None:
+        """Start Newton where the objective is finite: the predictor, else u_n, else the
+        linearised response to the pins' motion.
 
-        A large predicted step can invert elements, where energies such as neo-Hookean's
-        are undefined; u_n with the new pin positions is then the safer start.
+        A large predicted step, or pins that move far in one step, can invert elements,
+        where energies such as neo-Hookean's are undefined (+inf with the inversion
+        filter). The last resort is one Newton step from u_n with the pins still at their
+        old positions: the residual's lifting term carries the pins' increment into the
+        free dofs through the Hessian (a linear-elastic extension of the motion).
+
+        Raises:
+            ConvergenceError: if even that start inverts an element.
         """
         p = self.problem
+        x = p.x_work
+        u = compat.petsc_vec(p.u)
         for guess in (u_pred, u_last):
             p.u.x.array[:] = guess
-            u = compat.petsc_vec(p.u)
             fem_petsc.set_bc(u, p.bcs)
-            u.copy(p.x_work)
-            if math.isfinite(p.objective(None, p.x_work)):
+            u.copy(x)
+            if math.isfinite(p.objective(None, x)):
                 return
+        p.u.x.array[:] = u_last
+        u.copy(x)
+        r, step = x.duplicate(), x.duplicate()
+        p.residual(None, x, r)
+        p.jacobian(None, x, self.minimiser.A, self.minimiser.A)
+        ksp = self.minimiser.snes.getKSP()
+        ksp.setOperators(self.minimiser.A, self.minimiser.A)
+        ksp.solve(r, step)
+        x.axpy(-1.0, step)
+        r.destroy()
+        step.destroy()
+        if not math.isfinite(p.objective(None, x)):
+            raise ConvergenceError(f"{what}: no start for Newton keeps every element "
+                                   "uninverted (the pins move too far in one step): reduce "
+                                   "time.dt")
 
     # -- the run --------------------------------------------------------------------------
     def run(self, output_dir: Path | None = None, quiet: bool = False) -> RunResult:
@@ -207,11 +233,16 @@ class Simulation:
                 self._check_finite(state, energies)
                 if trajectory and (state.step % every == 0 or state.step == steps):
                     trajectory.write(state.time, self.gather.gather(state.u))
+                step_wall = time.perf_counter() - start
                 row = {"step": state.step, "time": state.time, "dt": h,
                        "newton_its": solve.newton_its, "linear_its": solve.linear_its,
                        "snes_reason": solve.reason, "residual_norm": solve.residual_norm,
-                       **energies, "solve_wall_s": solve.wall_s,
-                       "step_wall_s": time.perf_counter() - start}
+                       "newton_decrement": solve.newton_decrement, "shift": solve.shift,
+                       **energies, "assembly_s": solve.assembly_s, "factor_s": solve.factor_s,
+                       "linear_solve_s": solve.linear_solve_s,
+                       "other_s": step_wall - solve.assembly_s - solve.factor_s
+                       - solve.linear_solve_s,
+                       "solve_wall_s": solve.wall_s, "step_wall_s": step_wall}
                 rows.append(row)
                 if stats_file:
                     stats_file.write(row)

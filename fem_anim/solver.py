@@ -3,7 +3,19 @@
 Newton's method (seed eq. 10) with a backtracking line search on the true objective
 (``snes.setObjective``, STYLE rule 7) by default; every choice is a PETSc option under
 the solver's prefix (default ``fem_anim_``), merged with the precedence of
-:mod:`fem_anim.petsc_options` and read once by ``setFromOptions``.
+:mod:`fem_anim.petsc_options` and read once by ``setFromOptions``. The scene's
+``[solver]`` adds what PETSc options cannot say:
+
+* ``method``: :data:`NONLINEAR_METHODS`, each a layer of PETSc options (Newton with
+  backtracking, trust region, L-BFGS, nonlinear CG, gradient descent);
+* ``stopping``: PETSc's residual-norm tests, or the Newton decrement
+  lambda^2/2 = grad g^T H^-1 grad g / 2 <= ``decrement_tol`` (seed definition 4; affine
+  invariant, in the units of g), computed exactly from the Newton direction in the line
+  search pre-check;
+* ``hessian``: exact, shifted or projected (:mod:`fem_anim.hessian`);
+* ``inversion_filter``: the pre-check halves the Newton step until no element has
+  det F <= 0, and the objective is +inf there (:meth:`EnergyProblem.objective`), so no
+  iterate with an inverted element is ever accepted.
 """
 
 from __future__ import annotations
@@ -15,25 +27,51 @@ import numpy as np
 from petsc4py import PETSc
 
 from .errors import ConvergenceError, FemAnimError
+from .hessian import ShiftStrategy
 from .petsc_options import DEFAULT_PREFIX, options_in_database
 
-__all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON"]
+__all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "NONLINEAR_METHODS"]
+
+#: Scene ``solver.method`` -> PETSc options (lowest layer above the library defaults).
+NONLINEAR_METHODS: dict[str, dict[str, str]] = {
+    "newton": {"snes_type": "newtonls", "snes_linesearch_type": "bt"},
+    "trust_region": {"snes_type": "newtontr"},
+    "lbfgs": {"snes_type": "qn", "snes_qn_type": "lbfgs", "snes_linesearch_type": "bt",
+              "snes_max_it": "2000"},
+    "ncg": {"snes_type": "ncg", "snes_ncg_type": "prp", "snes_linesearch_type": "cp",
+            "snes_max_it": "5000"},
+    "gradient_descent": {"snes_type": "nrichardson", "snes_linesearch_type": "bt",
+                         "snes_max_it": "20000"},
+}
+MAX_FILTER_HALVINGS = 40
 
 #: Reason recorded when Newton stopped at the round-off floor of the objective: PETSc's
 #: CONVERGED_SNORM_RELATIVE, which PETSc itself never reports here (``snes_stol`` is 0).
 ROUNDOFF_REASON = 4
 ROUNDOFF_ULPS = 4096.0
+#: Reason recorded when the Newton-decrement test stopped the iteration: PETSc's
+#: CONVERGED_ITS ("converged by a user test"; a plain iteration cap is DIVERGED_MAX_IT).
+DECREMENT_REASON = 5
 
 
 @dataclass
 class SolveStats:
-    """What one minimisation cost and how it ended."""
+    """What one minimisation cost and how it ended.
+
+    ``newton_decrement`` is lambda^2/2 at the last Newton direction (NaN for methods
+    without one); ``shift`` the last Hessian shift c; times are wall seconds.
+    """
 
     newton_its: int
     linear_its: int
     reason: int
     residual_norm: float
     wall_s: float
+    newton_decrement: float = float("nan")
+    shift: float = 0.0
+    assembly_s: float = 0.0
+    factor_s: float = 0.0
+    linear_solve_s: float = 0.0
 
 
 class Minimiser:
@@ -46,18 +84,26 @@ class Minimiser:
         prefix: Options prefix, ending in ``_``.
     """
 
-    def __init__(self, problem, options: dict[str, str], prefix: str = DEFAULT_PREFIX):
+    def __init__(self, problem, options: dict[str, str], prefix: str = DEFAULT_PREFIX,
+                 settings: dict | None = None):
+        settings = settings or {}
         self.problem = problem
         self.prefix = prefix
+        self.stopping = settings.get("stopping", "norm")
+        self.decrement_tol = settings.get("decrement_tol", 0.0)
+        self.shift = ShiftStrategy() if settings.get("hessian") == "shift" else None
         self.A = problem.create_matrix()
         self.b = problem.create_vector()
         snes = self.snes = PETSc.SNES().create(problem.comm)
         snes.setOptionsPrefix(prefix)
         snes.setObjective(problem.objective)
         snes.setFunction(problem.residual, self.b)
-        snes.setJacobian(problem.jacobian, self.A)
+        snes.setJacobian(self._jacobian, self.A)
         snes.setConvergenceTest(self._converged)
         self._history: list[tuple[float, float]] = []
+        self._decrements: list[float] = []
+        PETSc.Log.begin()
+        self._events = [PETSc.Log.Event(name) for name in ("PCSetUp", "KSPSolve")]
         PETSc.Sys.pushErrorHandler("ignore")
         try:
             with options_in_database(prefix, options):
@@ -70,6 +116,8 @@ class Minimiser:
                                f"{shown}") from None
         finally:
             PETSc.Sys.popErrorHandler()
+        if snes.getType() in ("newtonls",):
+            snes.setLineSearchPreCheck(self._precheck)
 
     def solve(self, x: PETSc.Vec, what: str = "step") -> SolveStats:
         """Minimise from the initial guess ``x`` (overwritten with the minimiser).
@@ -78,6 +126,9 @@ class Minimiser:
             ConvergenceError: naming ``what``, the iteration count and the SNES/KSP reasons.
         """
         start = time.perf_counter()
+        self._decrements = []
+        assembly0 = self.problem.assembly_s
+        factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
         g0 = self.problem.objective(self.snes, x)
         self.snes.solve(None, x)
         reason = self.snes.getConvergedReason()
@@ -87,8 +138,13 @@ class Minimiser:
         if reason == ROUNDOFF_REASON or stalled:
             reason, norm = self._polish(x)
         wall = time.perf_counter() - start
-        stats = SolveStats(self.snes.getIterationNumber(), self.snes.getLinearSolveIterations(),
-                           reason, norm, wall)
+        factor1, solve1 = (e.getPerfInfo()["time"] for e in self._events)
+        stats = SolveStats(
+            self.snes.getIterationNumber(), self.snes.getLinearSolveIterations(), reason, norm,
+            wall, newton_decrement=self._decrements[-1] if self._decrements else float("nan"),
+            shift=self.shift.c if self.shift else 0.0,
+            assembly_s=self.problem.assembly_s - assembly0, factor_s=factor1 - factor0,
+            linear_solve_s=solve1 - solve0)
         if reason <= 0:
             ksp_reason = self.snes.getKSP().getConvergedReason()
             raise ConvergenceError(
@@ -115,9 +171,13 @@ class Minimiser:
         R = PETSc.SNES.ConvergedReason
         if not np.isfinite(fnorm):
             return R.DIVERGED_FNORM_NAN
-        if fnorm <= atol:
+        if self.stopping == "decrement":
+            # lambda^2/2 of the previous Newton direction (the step from it is taken)
+            if it > 0 and self._decrements and self._decrements[-1] <= self.decrement_tol:
+                return DECREMENT_REASON
+        elif fnorm <= atol:
             return R.CONVERGED_FNORM_ABS
-        if fnorm <= rtol * self._history[0][0]:
+        elif fnorm <= rtol * self._history[0][0]:
             return R.CONVERGED_FNORM_RELATIVE
         if it > 0:
             f_prev, g_prev = self._history[-2]
@@ -126,6 +186,81 @@ class Minimiser:
         if it >= max_it:
             return R.DIVERGED_MAX_IT
         return R.ITERATING
+
+    def _precheck(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
+        """Before the line search: record lambda^2/2 and filter inverting steps.
+
+        ``y`` is the full Newton direction (the line search tries x - alpha y) and the
+        residual r at x is in ``self.b``: lambda^2 = r . y (seed definition 4). With the
+        inversion filter on, y is halved until x - y has det F > 0 everywhere.
+        """
+        self._decrements.append(0.5 * abs(self.b.dot(y)))
+        if not self.problem.filter_inversion:
+            return False
+        trial = x.duplicate()
+        try:
+            for halvings in range(MAX_FILTER_HALVINGS):
+                x.copy(trial)
+                trial.axpy(-1.0, y)
+                self.problem.set_state(trial)
+                if self.problem.min_det_F() > 0.0:
+                    return halvings > 0
+                y.scale(0.5)
+            return True
+        finally:
+            trial.destroy()
+            self.problem.set_state(x)
+
+    def _jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
+        """The problem's Hessian, shifted by c I until it is positive definite if asked.
+
+        Positive definiteness is read off the factorisation: the inertia of MUMPS's or
+        PETSc's Cholesky (negative pivots), or a PETSc factorisation failure; for a
+        Krylov preset CG is run on the shifted matrix and must not meet negative
+        curvature. c starts from the last successful shift, quartered (hessian.py).
+        """
+        self.problem.jacobian(snes, x, A, P)
+        if self.shift is None:
+            return
+        scale = A.getDiagonal().norm(PETSc.NormType.INFINITY)
+        c = self.shift.first(scale)
+        if c > 0.0:
+            A.shift(c)
+        while not self._positive_definite(A):
+            previous = c
+            c = self.shift.raise_shift(scale)
+            A.shift(c - previous)
+            if c > 1e12 * max(scale, 1.0):
+                raise ConvergenceError("the Hessian shift grew beyond 1e12 x its diagonal: the "
+                                       "linear solver never reported a positive definite matrix")
+        self.shift.succeeded()
+
+    def _positive_definite(self, A: PETSc.Mat) -> bool:
+        ksp = self.snes.getKSP()
+        ksp.setOperators(A, A)
+        pc = ksp.getPC()
+        if pc.getType() in ("cholesky", "lu"):
+            PETSc.Sys.pushErrorHandler("ignore")
+            try:
+                pc.setUp()
+                negative, _, _ = pc.getFactorMatrix().getInertia()
+                return negative == 0
+            except PETSc.Error:
+                pass  # this factorisation reports no inertia: ask CG instead
+            finally:
+                PETSc.Sys.popErrorHandler()
+        probe = PETSc.KSP().create(A.getComm())
+        probe.setOperators(A, A)
+        probe.setType("cg")
+        probe.getPC().setType("jacobi")
+        probe.setTolerances(rtol=1e-6, max_it=200)
+        b, z = A.createVecs()
+        b.setRandom()
+        probe.solve(b, z)
+        indefinite = probe.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
+        for obj in (probe, b, z):
+            obj.destroy()
+        return not indefinite
 
     def _at_objective_roundoff(self, x: PETSc.Vec, g0: float) -> bool:
         """Whether Newton cannot decrease g any further in floating point.
@@ -150,8 +285,9 @@ class Minimiser:
 
         Below the objective's round-off the line search cannot tell a good step from a bad
         one, but the residual still can: take full steps while each at least halves the
-        residual norm, then apply the norm tests (``snes_atol``, ``snes_rtol``). If they
-        are still not met, x is as converged as double precision allows.
+        residual norm, then apply the chosen test (norms: ``snes_atol``, ``snes_rtol``;
+        or the decrement of the next Newton direction). If it is still not met, x is as
+        converged as double precision allows.
 
         Returns:
             The SNES reason to report and the final residual norm.
@@ -165,12 +301,16 @@ class Minimiser:
             self.problem.residual(self.snes, x, r)
             norm = r.norm()
             for _ in range(max_steps):
-                if norm <= target:
+                if norm <= target and self.stopping == "norm":
                     reason = R.CONVERGED_FNORM_ABS if norm <= atol else R.CONVERGED_FNORM_RELATIVE
                     return reason, norm
                 self.problem.jacobian(self.snes, x, self.A, self.A)
                 ksp.setOperators(self.A, self.A)
                 ksp.solve(r, step)
+                decrement = 0.5 * abs(r.dot(step))
+                self._decrements.append(decrement)
+                if self.stopping == "decrement" and decrement <= self.decrement_tol:
+                    return DECREMENT_REASON, norm
                 x.copy(trial)
                 trial.axpy(-1.0, step)
                 self.problem.residual(self.snes, trial, r_trial)

@@ -1,0 +1,139 @@
+"""The nonlinear solver menu: Hessian modification, the J > 0 filter, stopping tests, methods.
+
+The compression scene squeezes a soft 0.2 m cube between a fixed floor and a press that
+moves 5 cm per step (implicit Euler): elements are crushed, the exact Hessian becomes
+indefinite and plain Newton fails.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fem_anim.errors import ConvergenceError
+from fem_anim.scene import load_scene
+from fem_anim.simulation import Simulation
+
+SQUASH = """
+name = "squash"
+[mesh]
+size = [0.2, 0.2, 0.2]
+element_size = {element_size}
+[material]
+model = "{model}"
+youngs_modulus = 1e4
+poisson_ratio = 0.3
+[time]
+integrator = "implicit_euler"
+dt = {dt}
+steps = {steps}
+[solver]
+hessian = "{hessian}"
+{solver}
+[[pin]]
+name = "floor"
+min = [-1, -1, -0.001]
+max = [1, 1, 0.001]
+[[pin]]
+name = "press"
+min = [-1, -1, 0.199]
+max = [1, 1, 0.201]
+velocity = [0.0, 0.0, -1.0]
+until = 0.17
+"""
+
+
+def squash(tmp_path, model="stvk", hessian="exact", dt=0.05, steps=4, element_size=0.05,
+           solver="", cli=None):
+    path = tmp_path / f"squash_{model}_{hessian}.toml"
+    path.write_text(SQUASH.format(model=model, hessian=hessian, dt=dt, steps=steps,
+                                  element_size=element_size, solver=solver))
+    return Simulation(load_scene(path), MPI.COMM_WORLD, cli_options=cli)
+
+
+def run_steps(sim, steps, dt):
+    state = sim.initial_state()
+    its = 0
+    for _ in range(steps):
+        state, stats = sim.step(state, dt)
+        its += stats.newton_its
+    return state, its
+
+
+def test_hessian_modification_rescues_a_compression(tmp_path):
+    """StVK crushed: exact Newton fails; the shifted and the projected Hessian converge."""
+    with pytest.raises(ConvergenceError, match="step 1 .*did not converge"):
+        run_steps(squash(tmp_path, hessian="exact"), 4, 0.05)
+    results = {}
+    for hessian in ("shift", "project"):
+        sim = squash(tmp_path, hessian=hessian)
+        start = time.perf_counter()
+        state, its = run_steps(sim, 4, 0.05)
+        results[hessian] = (its, time.perf_counter() - start)
+        assert np.all(np.isfinite(state.u))
+        press = state.u.reshape(-1, 3)[sim.problem.moving_pins[0].dofs, 2]
+        assert press == pytest.approx(-0.17)
+    print("compression (stvk, 4 steps): Newton iterations and wall s:", results)
+    assert sim.minimiser.shift is None
+    assert squash(tmp_path, hessian="shift").minimiser.shift is not None
+
+
+def test_shift_raises_and_relaxes(tmp_path):
+    sim = squash(tmp_path, model="stable_neohookean", hessian="shift")
+    run_steps(sim, 4, 0.05)
+    shift = sim.minimiser.shift
+    assert shift.raises > 0  # the exact Hessian was indefinite at least once
+    # ... and c is lowered after each success, so it does not stay at its peak
+    assert shift.c < 2.0 ** shift.raises * shift.floor * 1e6
+
+
+def test_inversion_filter_prevents_a_nan(tmp_path):
+    """Full Newton steps (no line search) crush a neo-Hookean element at step 7: ln J of a
+    negative J is NaN. The filter halves the step before that, and the run completes."""
+    kwargs = dict(model="neohookean", dt=0.025, steps=8, cli={"snes_linesearch_type": "basic"})
+    sim = squash(tmp_path, solver="inversion_filter = false", **kwargs)
+    with pytest.raises(ConvergenceError, match="DIVERGED_FNORM_NAN"):
+        run_steps(sim, 8, 0.025)
+    sim = squash(tmp_path, **kwargs)
+    assert sim.problem.filter_inversion  # on by default for neo-Hookean
+    state, _ = run_steps(sim, 8, 0.025)
+    assert np.all(np.isfinite(state.u)) and sim.problem.min_det_F() > 0
+    energies = sim.problem.energies()
+    assert all(math.isfinite(v) for v in energies.values())
+
+
+def test_decrement_and_norm_tests_stop_at_the_same_solution(tmp_path):
+    """On a convex step (mild compression), lambda^2/2 <= eps and a tight norm test agree."""
+    kwargs = dict(model="neohookean", dt=0.01, steps=3, element_size=0.1)
+    by_norm, _ = run_steps(squash(tmp_path, cli={"snes_rtol": "1e-12", "snes_atol": "1e-14"},
+                                  **kwargs), 3, 0.01)
+    sim = squash(tmp_path, solver='stopping = "decrement"\ndecrement_tol = 1e-16', **kwargs)
+    state = sim.initial_state()
+    for _ in range(3):
+        state, stats = sim.step(state, 0.01)
+        assert stats.reason == 5 and stats.newton_decrement <= 1e-16
+    assert np.linalg.norm(state.u - by_norm.u) <= 1e-10 * np.linalg.norm(by_norm.u)
+
+
+@pytest.mark.parametrize("method, rtol", [("trust_region", 1e-7), ("lbfgs", 1e-5),
+                                          ("ncg", 1e-4), ("gradient_descent", 1e-3)])
+def test_nonlinear_methods_reach_the_same_step(tmp_path, method, rtol):
+    kwargs = dict(model="neohookean", dt=0.01, steps=1, element_size=0.1)
+    newton, _ = run_steps(squash(tmp_path, cli={"snes_rtol": "1e-12"}, **kwargs), 1, 0.01)
+    sim = squash(tmp_path, solver=f'method = "{method}"', cli={"snes_rtol": "1e-9"}, **kwargs)
+    other, its = run_steps(sim, 1, 0.01)
+    assert np.linalg.norm(other.u - newton.u) <= rtol * np.linalg.norm(newton.u), its
+
+
+def test_stats_carry_the_solver_figures(tmp_path):
+    sim = squash(tmp_path, model="neohookean", dt=0.01, steps=2, element_size=0.1)
+    state = sim.initial_state()
+    state, stats = sim.step(state, 0.01)
+    assert stats.newton_its >= 1 and math.isfinite(stats.newton_decrement)
+    parts = stats.assembly_s + stats.factor_s + stats.linear_solve_s
+    assert 0 < parts <= stats.wall_s * 1.05
+    assert stats.assembly_s > 0 and stats.factor_s > 0
