@@ -89,6 +89,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "integrator": Key(str, "newmark", _one_of(INTEGRATORS)),
         "dt": Key(NUM, 1.0 / 60.0, _positive),
         "steps": Key(int, 60, lambda v: None if v >= 1 else "must be >= 1"),
+        "adaptive": Key(bool, True),
+        "min_dt": Key(NUM, None, _positive),
     },
     "gravity": {"acceleration": Key(list, None, None, (2, 3))},
     "damping": {
@@ -317,6 +319,9 @@ def _check_consistency(data: dict[str, Any]) -> None:
                 raise SceneError(f"pin[{i}].axis must not be the zero vector")
         if pin["angular_velocity"] != 0 and d == 3 and pin["axis"] is None:
             raise SceneError(f"pin[{i}].axis is required with pin[{i}].angular_velocity")
+    if data["time"]["min_dt"] is not None and data["time"]["min_dt"] > data["time"]["dt"]:
+        raise SceneError(f"time.min_dt must not exceed time.dt = {data['time']['dt']}, got "
+                         f"{data['time']['min_dt']}")
     if data["element"]["degree"] == 2 and data["material"]["mass"] == "lumped":
         raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
                          "(row-sum lumping of P2 gives zero or negative vertex masses); use "

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ from .problem import EnergyProblem
 from .progress import Progress
 from .solver import NONLINEAR_METHODS, Minimiser, SolveStats
 
-__all__ = ["Simulation", "RunResult", "solver_options"]
+__all__ = ["Simulation", "RunResult", "AdaptiveStepper", "solver_options"]
 
 
 def solver_options(scene, cli_options: dict[str, str] | None = None,
@@ -223,30 +223,18 @@ class Simulation:
         state = self.initial_state()
         rows = []
         progress = Progress(steps, disable=quiet or self.comm.rank != 0)
+        stepper = AdaptiveStepper(self, h, self.scene["time"])
         try:
             if trajectory:
                 trajectory.write(0.0, self.gather.gather(state.u))
-            for _ in range(steps):
-                start = time.perf_counter()
-                state, solve = self.step(state, h)
-                energies = self.problem.energies()
-                self._check_finite(state, energies)
-                if trajectory and (state.step % every == 0 or state.step == steps):
+            for frame in range(1, steps + 1):
+                for state, row in stepper.advance(state, frame * h):
+                    rows.append(row)
+                    if stats_file:
+                        stats_file.write(row)
+                if trajectory and (frame % every == 0 or frame == steps):
                     trajectory.write(state.time, self.gather.gather(state.u))
-                step_wall = time.perf_counter() - start
-                row = {"step": state.step, "time": state.time, "dt": h,
-                       "newton_its": solve.newton_its, "linear_its": solve.linear_its,
-                       "snes_reason": solve.reason, "residual_norm": solve.residual_norm,
-                       "newton_decrement": solve.newton_decrement, "shift": solve.shift,
-                       **energies, "assembly_s": solve.assembly_s, "factor_s": solve.factor_s,
-                       "linear_solve_s": solve.linear_solve_s,
-                       "other_s": step_wall - solve.assembly_s - solve.factor_s
-                       - solve.linear_solve_s,
-                       "solve_wall_s": solve.wall_s, "step_wall_s": step_wall}
-                rows.append(row)
-                if stats_file:
-                    stats_file.write(row)
-                progress.update(solve.newton_its)
+                progress.update(row["newton_its"])
         finally:
             progress.close()
             if stats_file:
@@ -263,9 +251,74 @@ class Simulation:
                             title=f"{self.scene.name}  t = {state.time:.3f} s")
         return RunResult(state, rows, run_dir.path if run_dir else None, final)
 
+    def timed_step(self, state: State, dt: float) -> tuple[State, dict]:
+        """One step and its stats row; a non-finite result counts as not converged."""
+        start = time.perf_counter()
+        new, solve = self.step(state, dt)
+        energies = self.problem.energies()
+        self._check_finite(new, energies)
+        wall = time.perf_counter() - start
+        return new, {
+            "step": new.step, "time": new.time, "dt": dt, "newton_its": solve.newton_its,
+            "linear_its": solve.linear_its, "snes_reason": solve.reason,
+            "residual_norm": solve.residual_norm, "newton_decrement": solve.newton_decrement,
+            "shift": solve.shift, **energies, "assembly_s": solve.assembly_s,
+            "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,
+            "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,
+            "solve_wall_s": solve.wall_s, "step_wall_s": wall}
+
     def _check_finite(self, state: State, energies: dict[str, float]) -> None:
         """No NaN or inf may reach a frame: stop with a clear message instead."""
         bad = not (np.all(np.isfinite(state.u)) and all(map(math.isfinite, energies.values())))
         if self.comm.allreduce(bad, op=MPI.LOR):
             raise ConvergenceError(f"step {state.step} (t = {state.time:.6g} s) produced a "
                                    "non-finite displacement or energy")
+
+
+class AdaptiveStepper:
+    """Adaptive time stepping: halve dt when a step fails, grow it back after successes.
+
+    A frame of length h is reached by substeps. A substep whose minimisation does not
+    converge (or whose result is not finite) is discarded, the state is left as it was,
+    and it is retried with dt halved, down to ``time.min_dt``; after each success dt is
+    doubled again, up to h. Substeps never overshoot a frame time, so frames stay at
+    multiples of h and no frame comes from a failed step. BDF2's history assumes a
+    constant step: after a change of dt it restarts with one implicit Euler step.
+    With ``time.adaptive = false`` the first failure stops the run.
+    """
+
+    def __init__(self, sim: Simulation, h: float, time_cfg: dict):
+        self.sim = sim
+        self.h = h
+        self.adaptive = time_cfg["adaptive"]
+        self.min_dt = time_cfg["min_dt"] if time_cfg["min_dt"] is not None else h / 256.0
+        self.dt = h
+        self.last_dt = h
+
+    def advance(self, state: State, t_end: float):
+        """Yield (state, stats row) for each accepted substep until ``t_end``."""
+        retries = 0
+        while t_end - state.time > 1e-9 * self.h:
+            dt = min(self.dt, t_end - state.time)
+            if dt > t_end - state.time - 1e-9 * self.h:
+                dt = t_end - state.time  # land exactly on the frame time
+            trial = state
+            if self.sim.integrator.name == "bdf2" and abs(dt - self.last_dt) > 1e-12 * self.h:
+                trial = replace(state, u_old=None, v_old=None)
+            try:
+                new, row = self.sim.timed_step(trial, dt)
+            except ConvergenceError as err:
+                if not self.adaptive or self.dt / 2.0 < self.min_dt:
+                    floor = "" if not self.adaptive else \
+                        f" (time.min_dt = {self.min_dt:.3g} s reached)"
+                    raise ConvergenceError(f"{err}{floor}") from None
+                self.dt /= 2.0
+                retries += 1
+                continue
+            row["retries"] = retries
+            retries = 0
+            self.last_dt = dt
+            if dt == self.dt:
+                self.dt = min(2.0 * self.dt, self.h)
+            state = new
+            yield state, row

@@ -100,8 +100,9 @@ def test_petsc_options_reach_the_solver(tmp_path):
     assert main(["run", "-o", str(cg), "-q", "--set", "time.steps=3",
                  "-ksp_type", "cg", "-pc_type", "icc", "-ksp_rtol", "1e-10"]) == 0
     rows_direct, rows_cg = read_stats(direct / "stats.csv"), read_stats(cg / "stats.csv")
-    # a direct solve is one "iteration" per Newton step; CG/ICC needs many
-    assert all(r["linear_its"] == r["newton_its"] for r in rows_direct)
+    # a direct solve is one "iteration" per Newton direction (one more when the last
+    # direction's line search stopped at round-off); CG/ICC needs many
+    assert all(r["newton_its"] <= r["linear_its"] <= r["newton_its"] + 1 for r in rows_direct)
     assert all(r["linear_its"] > 5 * r["newton_its"] for r in rows_cg)
     for a, b in zip(rows_direct, rows_cg):  # same steps (the total is a small difference)
         for key in ("kinetic", "elastic", "gravity"):
@@ -114,11 +115,11 @@ def test_scene_petsc_table_and_command_line_precedence(tmp_path):
         'preset = "cholesky"', 'preset = "cholesky"\n[solver.petsc]\nsnes_max_it = 1'))
     # the scene's snes_max_it = 1 cannot converge a Newton step from the predictor ...
     r = run_cli(["run", str(scene), "-o", str(tmp_path / "a"), "-q",
-                 "--set", "time.steps=2"], tmp_path)
+                 "--set", "time.steps=2", "--set", "time.adaptive=false"], tmp_path)
     assert r.returncode == 2 and "did not converge after 1 Newton" in r.stderr
     # ... and the command line wins over the scene file
     r = run_cli(["run", str(scene), "-o", str(tmp_path / "b"), "-q", "--set", "time.steps=2",
-                 "-snes_max_it", "20"], tmp_path)
+                 "--set", "time.adaptive=false", "-snes_max_it", "20"], tmp_path)
     assert r.returncode == 0, r.stderr
 
 
