@@ -34,7 +34,7 @@ GLOBAL_OPTIONS = frozenset({
 })
 
 #: Families of solver options accepted on the command line (without prefix).
-SOLVER_FAMILIES = ("snes_", "ksp_", "pc_", "mat_", "fem_anim_")
+SOLVER_FAMILIES = ("snes_", "ksp_", "pc_", "mat_", "sub_", "mg_", "fem_anim_")
 
 
 def _is_value(token: str) -> bool:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import basix
 import numpy as np
 import ufl
-from dolfinx import fem
+from dolfinx import fem, la
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -398,10 +398,39 @@ class EnergyProblem:
         self.assembly_s += time.perf_counter() - start
 
     def create_matrix(self) -> PETSc.Mat:
-        """The Jacobian matrix, sparsity and preallocation built once."""
+        """The Jacobian matrix, sparsity and preallocation built once.
+
+        It carries the rigid-body modes as near-nullspace, which algebraic multigrid
+        (``cg-gamg``) needs for elasticity and every other solver ignores.
+        """
         A = fem_petsc.create_matrix(self.jacobian_form)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        A.setNearNullSpace(self.rigid_body_modes())
         return A
+
+    def rigid_body_modes(self) -> PETSc.NullSpace:
+        """Translations and infinitesimal rotations of the body, orthonormalised."""
+        x = self.V.tabulate_dof_coordinates()
+        n_owned = self.V.dofmap.index_map.size_local
+        x = x[:n_owned, : self.d]
+        d = self.d
+        modes = []
+        for axis in range(d):
+            mode = np.zeros((n_owned, d))
+            mode[:, axis] = 1.0
+            modes.append(mode)
+        planes = [(0, 1)] if d == 2 else [(0, 1), (1, 2), (2, 0)]
+        for i, j in planes:  # rotation in the (i, j) plane: (-x_j, x_i)
+            mode = np.zeros((n_owned, d))
+            mode[:, i], mode[:, j] = -x[:, j], x[:, i]
+            modes.append(mode)
+        vectors = []
+        for mode in modes:
+            v = self.create_vector()
+            v.array[:] = mode.ravel()
+            vectors.append(v)
+        la.orthonormalize(vectors)
+        return PETSc.NullSpace().create(vectors=vectors, comm=self.comm)
 
     def create_vector(self) -> PETSc.Vec:
         return fem_petsc.create_vector(self.residual_form)

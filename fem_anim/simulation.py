@@ -9,6 +9,7 @@ final state. :meth:`Simulation.step` is the single step, usable on its own.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -25,7 +26,7 @@ from .integrator import Integrator, State
 from .mesh import SimplexMesh, build_mesh
 from .output import RunDirectory, StatsWriter, TrajectoryWriter, VertexGather, write_final
 from .petsc_options import flatten_options, merge_options
-from .presets import NEWTON_DEFAULTS, preset_options
+from .presets import NEWTON_DEFAULTS, drop_replaced, parallel_note, preset_options
 from .problem import EnergyProblem
 from .progress import Progress
 from .solver import NONLINEAR_METHODS, Minimiser, SolveStats
@@ -34,26 +35,26 @@ __all__ = ["Simulation", "RunResult", "AdaptiveStepper", "solver_options"]
 
 
 def solver_options(scene, cli_options: dict[str, str] | None = None,
-                   preset: str | None = None) -> dict[str, str]:
+                   preset: str | None = None, comm_size: int = 1) -> dict[str, str]:
     """Merged PETSc options: defaults < method < preset < scene ``[solver.petsc]`` < command line.
 
-    A preset's ``pc_*`` options describe its preconditioner; when the scene or the command
-    line chooses another ``pc_type``, they are dropped with it (``-pc_type icc`` on top of
-    the MUMPS ``cholesky`` preset is ICC, not "ICC by MUMPS").
+    The preset is its parallel variant when ``comm_size > 1``
+    (:func:`fem_anim.presets.parallel_options`). A preset's options that belong to a
+    component a higher layer replaces (its ``pc_*`` when ``pc_type`` changes, ...) are
+    dropped with it (``-pc_type icc`` on top of the MUMPS ``cholesky`` preset is ICC,
+    not "ICC by MUMPS"; :func:`fem_anim.presets.drop_replaced`).
 
     Raises:
         FemAnimError: for an unknown preset name (naming ``solver.preset`` or ``--solver``).
     """
     name = preset or scene["solver"]["preset"]
     try:
-        layer = preset_options(name)
+        layer = preset_options(name, comm_size=comm_size)
     except KeyError as err:
         key = "--solver" if preset else "solver.preset"
         raise FemAnimError(f"{key}: {err.args[0]}") from None
     above = merge_options(flatten_options(scene["solver"]["petsc"]), cli_options or {})
-    if above.get("pc_type", layer.get("pc_type")) != layer.get("pc_type"):
-        # a preset's pc_* options belong to its preconditioner: drop them with it
-        layer = {k: v for k, v in layer.items() if not k.startswith("pc_")}
+    layer = drop_replaced(layer, above)
     method = NONLINEAR_METHODS[scene["solver"]["method"]]
     if scene["solver"]["hessian"] == "shift":
         layer = layer | {"mat_mumps_icntl_13": "1"}  # exact inertia from MUMPS in parallel
@@ -87,7 +88,10 @@ class Simulation:
                  domain: SimplexMesh | None = None):
         self.scene = scene
         self.comm = comm
-        options = solver_options(scene, cli_options, preset)
+        options = solver_options(scene, cli_options, preset, comm.size)
+        note = parallel_note(preset or scene["solver"]["preset"], comm.size)
+        if note and comm.rank == 0:
+            print(f"fem-anim: {note}", file=sys.stderr)
         self.domain = domain if domain is not None else build_mesh(comm, scene)
         self.problem = EnergyProblem(scene, self.domain)
         self.integrator = Integrator(scene["time"]["integrator"])

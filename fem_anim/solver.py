@@ -130,7 +130,15 @@ class Minimiser:
         assembly0 = self.problem.assembly_s
         factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
         g0 = self.problem.objective(self.snes, x)
-        self.snes.solve(None, x)
+        PETSc.Sys.pushErrorHandler("ignore")  # reported once, below, not as PETSc's stack
+        try:
+            self.snes.solve(None, x)
+        except PETSc.Error as err:
+            raise FemAnimError(f"{what}: PETSc failed inside the solver (error {err.ierr}); "
+                               "check the solver options (e.g. a serial-only preconditioner "
+                               "on several processes)") from None
+        finally:
+            PETSc.Sys.popErrorHandler()
         reason = self.snes.getConvergedReason()
         stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
             self._at_objective_roundoff(x, g0)

@@ -137,3 +137,31 @@ def test_stats_carry_the_solver_figures(tmp_path):
     parts = stats.assembly_s + stats.factor_s + stats.linear_solve_s
     assert 0 < parts <= stats.wall_s * 1.05
     assert stats.assembly_s > 0 and stats.factor_s > 0
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_near_nullspace_is_the_rigid_body_modes(tmp_path, dim):
+    """The Hessian carries the rigid-body modes (for GAMG): K_0 z = 0 for each mode."""
+    import ufl
+    from dolfinx import fem
+    from dolfinx.fem import petsc as fem_petsc
+
+    overrides = [] if dim == 3 else ["mesh.dim=2", "mesh.size=[1.0, 0.2]",
+                                     "gravity.acceleration=[0, -9.81]", "pin.0.min=[0, 0]",
+                                     "pin.0.max=[0.001, 1]"]
+    sim = Simulation(load_scene(None, ["mesh.element_size=0.1"] + overrides), MPI.COMM_WORLD)
+    p = sim.problem
+    vectors = p.rigid_body_modes().getVecs()
+    assert len(vectors) == (6 if dim == 3 else 3)
+    gram = np.array([[a.dot(b) for b in vectors] for a in vectors])
+    np.testing.assert_allclose(gram, np.eye(len(vectors)), atol=1e-12)
+    v, du = ufl.TestFunction(p.V), ufl.TrialFunction(p.V)
+    K = fem_petsc.assemble_matrix(fem.form(ufl.derivative(ufl.derivative(
+        p.ufl_elastic, p.u, v), p.u, du)))
+    K.assemble()
+    scale = K.norm()
+    for z in vectors:
+        Kz = z.duplicate()
+        K.mult(z, Kz)
+        assert Kz.norm() <= 1e-10 * scale
+    assert sim.minimiser.A.getNearNullSpace().getVecs()
