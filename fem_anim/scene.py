@@ -27,7 +27,7 @@ __all__ = ["Scene", "load_scene", "parse_override", "DEFAULTS", "SCHEMA", "defau
 MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
                    "corotated_lagged")
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
-MESH_SHAPES = ("box", "file")
+MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
 NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
 MAX_MAGNITUDE = 1.0e150  # larger values are taken as a typo or an attack, not physics
 
@@ -70,6 +70,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "dim": Key(int, 3, _one_of((2, 3))),
         "size": Key(list, [1.0, 0.2, 0.2], _all_positive, (2, 3)),
         "origin": Key(list, None, None, (2, 3)),
+        "radius": Key(NUM, 0.1, _positive),
+        "length": Key(NUM, 0.5, _positive),
+        "minor_radius": Key(NUM, 0.03, _positive),
         "element_size": Key(NUM, 0.05, _positive),
         "file": Key(str, None),
     },
