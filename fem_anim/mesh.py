@@ -1,13 +1,23 @@
 """From a scene's ``[mesh]`` to a distributed DOLFINx mesh (STYLE rule 3).
 
-The mesh is made on rank 0 (gmsh builder or meshio file), checked there, and
-distributed with one collective call. Rank 0 keeps the input points and cells: output
-is written in that ordering, so serial and parallel runs write identical files, and the
-hand-assembled reference (:mod:`fem_anim.reference`) can be compared vertex by vertex.
+The mesh is made on rank 0 (a gmsh builder of :mod:`fem_anim.meshes`, or a file meshio
+reads, a closed triangulated surface being filled with tetrahedra by gmsh), checked there
+(:func:`check_cells`, :func:`check_surface`), and distributed with one collective call.
+Rank 0 keeps the input points and cells: output is written in that ordering, so serial
+and parallel runs write identical files, and the hand-assembled reference
+(:mod:`fem_anim.reference`) can be compared vertex by vertex.
+
+Cell orientation: DOLFINx 0.5 integrates with ``|det J|``, and its facet normals
+``J^{-T} n_ref`` point outward whatever the sign of ``det J``, so a mesh whose cells have
+mixed vertex orders (as files from some tools do) is accepted. A cell is *inverted* when
+it folds over a neighbour: the two cells sharing a facet lie on the same side of it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,9 +27,22 @@ from mpi4py import MPI
 from . import compat
 from .errors import MeshError
 
-__all__ = ["SimplexMesh", "build_mesh", "mesh_from_arrays", "check_cells"]
+__all__ = [
+    "SimplexMesh",
+    "build_mesh",
+    "check_cells",
+    "check_surface",
+    "mesh_from_arrays",
+    "read_mesh_file",
+]
 
 CELL_NAMES = {2: "triangle", 3: "tetrahedron"}
+#: meshio cell types read as simplices of each dimension (higher-order ones by their corners).
+MESHIO_TYPES = {2: ("triangle", "triangle6", "triangle7"), 3: ("tetra", "tetra10")}
+#: Integer cell data taken as region markers, first found wins.
+MARKER_KEYS = ("gmsh:physical", "medit:ref", "cell_markers", "CellEntityIds")
+#: A cell whose ``|det D_m|`` is below this times its longest edge to the ``d`` is flat.
+FLAT = 1e-12
 
 
 @dataclass
@@ -49,35 +72,184 @@ class SimplexMesh:
         return self.mesh.geometry.index_map().size_global
 
 
+def _fmt(x: np.ndarray) -> str:
+    return "(" + ", ".join(f"{c:.6g}" for c in x) + ")"
+
+
+def _check_simplices(points: np.ndarray, cells: np.ndarray, source: str, what: str) -> None:
+    """Shape, emptiness, index range and finite coordinates of a simplex array."""
+    if cells.ndim != 2 or cells.shape[0] == 0:
+        raise MeshError(f"{source}: the mesh has no {what}s")
+    n = points.shape[0]
+    bad = (cells < 0) | (cells >= n)
+    if np.any(bad):
+        c, k = np.argwhere(bad)[0]
+        raise MeshError(f"{source}: {what} {c} has vertex index {cells[c, k]} out of range "
+                        f"0..{n - 1}")
+    finite = np.all(np.isfinite(points), axis=1)
+    if not np.all(finite):
+        v = int(np.argmin(finite))
+        raise MeshError(f"{source}: vertex {v} has a NaN or infinite coordinate "
+                        f"{_fmt(points[v])}")
+
+
+def _signed_measures(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """``det[X_1 - X_0, ..., X_d - X_0]`` per cell (``d!`` times its signed volume)."""
+    return np.linalg.det(points[cells[:, 1:]] - points[cells[:, :1]])
+
+
 def check_cells(points: np.ndarray, cells: np.ndarray, source: str) -> None:
-    """Reject meshes with no cells, bad indices, or inverted or zero-volume cells.
+    """Reject a simplex mesh DOLFINx cannot use, naming the first offending cell or vertex.
+
+    Checked in order: cells exist and have ``d + 1`` vertices; indices are in range;
+    coordinates are finite; every vertex belongs to a cell; no cell is flat
+    (``|det D_m| <= 1e-12 h^d``, ``h`` its longest edge); no cell repeats another; no facet
+    has more than two cells; and no cell is inverted, i.e. folded over the neighbour across
+    one of its facets (both on the same side of it). Mixed vertex orders are fine: DOLFINx
+    integrates with ``|det J|`` (module docstring).
 
     Raises:
-        MeshError: naming the first offending cell and its signed measure.
+        MeshError: naming the offending cell (or vertex) and what is wrong with it.
     """
-    if cells.shape[0] == 0:
+    if cells.size == 0:
         raise MeshError(f"{source}: the mesh has no cells")
-    if cells.min() < 0 or cells.max() >= points.shape[0]:
-        raise MeshError(f"{source}: cell vertex indices out of range 0..{points.shape[0] - 1}")
-    if not np.all(np.isfinite(points)):
-        raise MeshError(f"{source}: vertex coordinates contain NaN or inf")
+    d = points.shape[1] if points.ndim == 2 else 0
+    if d not in (2, 3) or cells.ndim != 2 or cells.shape[1] != d + 1:
+        raise MeshError(f"{source}: expected points of shape (n, 2 or 3) and cells with one "
+                        f"more column, got {points.shape} and {cells.shape}")
+    _check_simplices(points, cells, source, "cell")
+    used = np.bincount(cells.ravel(), minlength=points.shape[0]) > 0
+    if not np.all(used):
+        v = int(np.argmin(used))
+        raise MeshError(f"{source}: vertex {v} {_fmt(points[v])} belongs to no cell")
+
+    measure = _signed_measures(points, cells)
+    X = points[cells]
+    h = np.sqrt(np.max(np.sum((X[:, :, None] - X[:, None]) ** 2, axis=-1), axis=(1, 2)))
+    flat = np.abs(measure) <= FLAT * h**d
+    if np.any(flat):
+        c = int(np.argmax(flat))
+        raise MeshError(f"{source}: cell {c} (vertices {cells[c].tolist()}) has zero volume "
+                        f"({measure[c] / math.factorial(d):.3g})")
+
+    _, first, inverse = np.unique(np.sort(cells, axis=1), axis=0, return_index=True,
+                                  return_inverse=True)
+    repeat = first[inverse.reshape(-1)] != np.arange(cells.shape[0])
+    if np.any(repeat):
+        c = int(np.argmax(repeat))
+        raise MeshError(f"{source}: cell {c} (vertices {cells[c].tolist()}) duplicates cell "
+                        f"{int(first[inverse.reshape(-1)[c]])}")
+    _check_facets(points, cells, measure, source)
+
+
+def _check_facets(points: np.ndarray, cells: np.ndarray, measure: np.ndarray,
+                  source: str) -> None:
+    """No facet of more than two cells, no two cells on the same side of their facet."""
     d = points.shape[1]
-    Dm = (points[cells[:, :d]] - points[cells[:, d:d + 1]]).transpose(0, 2, 1)
-    measure = np.linalg.det(Dm)
-    scale = np.max(np.ptp(points, axis=0)) ** d
-    tiny = np.abs(measure) <= 1e-14 * scale
-    if np.any(tiny):
-        c = int(np.argmax(tiny))
-        raise MeshError(f"{source}: cell {c} has zero volume ({measure[c]:.3g})")
-    if np.any(measure > 0) and np.any(measure < 0):
-        sign = np.sign(np.median(measure))
-        c = int(np.argmax(np.sign(measure) != sign))
-        raise MeshError(f"{source}: cell {c} is inverted (signed volume {measure[c]:.3g} "
-                        "against the orientation of the others)")
-    _, first, counts = np.unique(np.sort(cells, axis=1), axis=0, return_index=True,
-                                 return_counts=True)
-    if np.any(counts > 1):
-        raise MeshError(f"{source}: cell {int(first[counts > 1][0])} is duplicated")
+    facet_name = ("edge", "face")[d - 2]
+    drop = np.array([np.delete(np.arange(d + 1), k) for k in range(d + 1)])  # facet k: not k
+    facets = np.sort(cells[:, drop], axis=2).reshape(-1, d)
+    owner = np.repeat(np.arange(cells.shape[0]), d + 1)
+    opposite = cells.reshape(-1)
+    order = np.lexsort(facets.T[::-1])
+    facets, owner, opposite = facets[order], owner[order], opposite[order]
+    same = np.all(facets[1:] == facets[:-1], axis=1)  # row i and i + 1 are one facet
+    if np.any(same[1:] & same[:-1]):
+        i = int(np.argmax(same[1:] & same[:-1]))
+        raise MeshError(f"{source}: the {facet_name} with vertices {facets[i].tolist()} belongs to "
+                        f"more than two cells ({', '.join(map(str, owner[i:i + 3]))}, ...): "
+                        "the mesh overlaps itself")
+    i = np.flatnonzero(same)
+    base = points[facets[i]]
+    span = base[:, 1:] - base[:, :1]
+
+    def side(v: np.ndarray) -> np.ndarray:
+        return np.linalg.det(np.concatenate([span, (points[v] - base[:, 0])[:, None]], axis=1))
+
+    folded = side(opposite[i]) * side(opposite[i + 1]) > 0
+    if np.any(folded):
+        k = int(i[np.argmax(folded)])
+        a, b = sorted((int(owner[k]), int(owner[k + 1])))
+        majority = np.sign(np.sum(np.sign(measure)))
+        if np.sign(measure[a]) == np.sign(measure[b]) or majority == 0:
+            what = f"cells {a} and {b} overlap (one of them is inverted)"
+        else:
+            bad, good = (a, b) if np.sign(measure[a]) != majority else (b, a)
+            what = f"cell {bad} is inverted: it folds over cell {good}"
+        raise MeshError(f"{source}: {what} across their shared {facet_name} "
+                        f"with vertices {facets[k].tolist()}")
+
+
+def check_surface(points: np.ndarray, triangles: np.ndarray, source: str) -> None:
+    """Reject a triangulated surface that does not bound one solid, naming an example.
+
+    The surface must be closed (every edge in exactly two triangles), manifold (no edge in
+    more than two, and the triangles around each vertex form one fan) and connected.
+    Triangle orientation is not needed.
+
+    Args:
+        points: ``(n, 3)`` vertex coordinates.
+        triangles: ``(m, 3)`` vertex indices.
+        source: What the surface is, for the message (e.g. the file).
+
+    Raises:
+        MeshError: naming the defect and an edge, vertex or triangle showing it.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    _check_simplices(points, triangles, source, "triangle")
+    X = points[triangles]
+    area2 = np.linalg.norm(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), axis=1)
+    h = np.max(np.linalg.norm(X - X[:, [1, 2, 0]], axis=2), axis=1)
+    flat = area2 <= FLAT * h**2
+    if np.any(flat):
+        t = int(np.argmax(flat))
+        raise MeshError(f"{source}: triangle {t} (vertices {triangles[t].tolist()}) has zero "
+                        "area")
+
+    def edge_text(j: int) -> str:
+        a, b = unique[j]
+        return f"the edge from vertex {a} {_fmt(points[a])} to vertex {b} {_fmt(points[b])}"
+
+    m = triangles.shape[0]
+    edges = triangles[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)  # row 3 t + k
+    unique, inverse, counts = np.unique(np.sort(edges, axis=1), axis=0, return_inverse=True,
+                                        return_counts=True)
+    inverse = inverse.reshape(-1)
+    if np.any(counts == 1):
+        j = int(np.argmax(counts == 1))
+        raise MeshError(f"{source}: the surface is open ({int(np.sum(counts == 1))} edges "
+                        f"belong to one triangle only, e.g. {edge_text(j)}); a volume mesh "
+                        "is made only from a closed surface")
+    if np.any(counts > 2):
+        j = int(np.argmax(counts > 2))
+        shared = (np.flatnonzero(inverse == j) // 3).tolist()
+        raise MeshError(f"{source}: the surface is not manifold: {edge_text(j)} belongs to "
+                        f"{counts[j]} triangles {shared} (at most two are allowed)")
+
+    # every edge now has two rows r1, r2; link the corners of its end vertices across it
+    rows = np.argsort(inverse, kind="stable").reshape(-1, 2)
+    r = rows.ravel()
+    second = 3 * (r // 3) + (r % 3 + 1) % 3  # corner (row 3t + k) of the edge's 2nd vertex
+    low = np.where(edges[r, 0] < edges[r, 1], r, second).reshape(-1, 2)
+    high = np.where(edges[r, 0] < edges[r, 1], second, r).reshape(-1, 2)
+    links = np.concatenate([low, high])
+    graph = coo_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(3 * m, 3 * m))
+    _, fan = connected_components(graph, directed=False)
+    vertex_fans = np.unique(np.stack([triangles.ravel(), fan]), axis=1)[0]
+    fans = np.bincount(vertex_fans, minlength=points.shape[0])
+    if np.any(fans > 1):
+        v = int(np.argmax(fans > 1))
+        raise MeshError(f"{source}: the surface is not manifold at vertex {v} {_fmt(points[v])}"
+                        f", where {fans[v]} separate sheets of triangles meet")
+    pairs = rows // 3
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
+    parts, label = connected_components(graph, directed=False)
+    if parts > 1:
+        t = int(np.argmax(label != label[0]))
+        raise MeshError(f"{source}: the surface has {parts} separate parts (triangles 0 and "
+                        f"{t} are in different ones); only one closed surface is supported")
 
 
 def mesh_from_arrays(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray,
@@ -108,12 +280,39 @@ def mesh_from_arrays(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray,
     return SimplexMesh(mesh, points, cells, cell_markers.astype(np.int32), input_index)
 
 
+@contextlib.contextmanager
+def _gmsh_session(source: str, hint: str):
+    """An initialised, quiet, single-threaded gmsh; its failures become :class:`MeshError`.
+
+    The message names ``source``, gmsh's own error and ``hint``, the likely cause.
+    """
+    import gmsh
+
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.logger.start()
+        try:
+            yield gmsh.model
+        except MeshError:
+            raise
+        except Exception as err:
+            if type(err) is not Exception:  # gmsh raises bare Exceptions; others are bugs
+                raise
+            errors = [m for m in gmsh.logger.get() if m.startswith("Error")]
+            detail = " ".join((str(err) or (errors[-1] if errors else repr(err))).split())
+            raise MeshError(f"{source}: gmsh failed: {detail} ({hint})") from None
+    finally:
+        gmsh.finalize()
+
+
 def _gmsh_arrays(model, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices, simplices and physical-group markers of a meshed gmsh model."""
     tags, coords, _ = model.mesh.getNodes()
     points = coords.reshape(-1, 3)[:, :dim]
-    index = np.empty(int(tags.max()) + 1, dtype=np.int64)  # gmsh node tag -> row of points
-    index[tags] = np.arange(tags.size)
+    index = np.empty(int(tags.max()) + 1 if tags.size else 0, dtype=np.int64)
+    index[tags] = np.arange(tags.size)  # gmsh node tag -> row of points
     etype = {2: 2, 3: 4}[dim]  # gmsh: 3-node triangle, 4-node tetrahedron
     cells_list, markers_list = [], []
     for _, group in model.getPhysicalGroups(dim):
@@ -125,53 +324,113 @@ def _gmsh_arrays(model, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                     markers_list.append(np.full(cells_list[-1].shape[0], group, np.int32))
     if not cells_list:
         return points, np.empty((0, dim + 1), np.int64), np.empty(0, np.int32)
-    cells = np.concatenate(cells_list)
+    points, cells = _compact(points, np.concatenate(cells_list))
+    return points, cells, np.concatenate(markers_list)
+
+
+def _compact(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop the points no cell uses (unless an index is out of range: check_cells says so)."""
+    if cells.size == 0 or cells.min() < 0 or cells.max() >= points.shape[0]:
+        return points, cells
     used = np.unique(cells)
     remap = np.full(points.shape[0], -1, dtype=np.int64)
     remap[used] = np.arange(used.size)
-    return points[used], remap[cells], np.concatenate(markers_list)
+    return points[used], remap[cells]
 
 
-def _build_gmsh(mesh_cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    import gmsh
-
+def _build_gmsh(cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mesh ``cfg["shape"]`` with its builder, given the whole ``[mesh]`` table."""
     from fem_anim.meshes import BUILDERS
 
-    gmsh.initialize()
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        model = BUILDERS[mesh_cfg["shape"]](gmsh.model, size=mesh_cfg["size"],
-                                            element_size=mesh_cfg["element_size"],
-                                            origin=mesh_cfg["origin"])
-        return _gmsh_arrays(model, len(mesh_cfg["size"]))
-    finally:
-        gmsh.finalize()
+    source = f"mesh ({cfg['shape']})"
+    hint = f"is mesh.element_size = {cfg['element_size']} too large for the shape?"
+    with _gmsh_session(source, hint) as model:
+        try:
+            model = BUILDERS[cfg["shape"]](model, cfg)
+        except ValueError as err:
+            raise MeshError(f"{source}: {err}") from None
+        return _gmsh_arrays(model, cfg["dim"])
 
 
-def _read_file(path: Path, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _fill_surface(points: np.ndarray, triangles: np.ndarray, element_size: float,
+                  source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tetrahedralise the solid a closed surface bounds (checked first)."""
+    from fem_anim.meshes import build_volume_from_surface
+
+    # merge repeated vertices (an STL has no others), keeping the first occurrences' order
+    _, first, inverse = np.unique(points, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    points, triangles = points[first[order]], rank[inverse.reshape(-1)][triangles]
+    check_surface(points, triangles, source)
+    with _gmsh_session(source, "the surface must not intersect itself") as model:
+        model = build_volume_from_surface(model, points, triangles, element_size)
+        points, cells, markers = _gmsh_arrays(model, 3)
+    if cells.shape[0] == 0:
+        raise MeshError(f"{source}: gmsh made no tetrahedra inside the surface")
+    return points, cells, markers
+
+
+def read_mesh_file(path: Path, dim: int, element_size: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points, simplices and region markers of a mesh file (rank 0; not collective).
+
+    Any format meshio reads. The cells are the file's triangles (``dim = 2``, which must lie
+    in a plane ``z = const``) or tetrahedra (``dim = 3``); other cells are ignored (e.g. a
+    gmsh file's boundary triangles), and points no cell uses are dropped. Markers come from
+    the first of :data:`MARKER_KEYS` present (gmsh physical groups, medit references), else
+    all 1. For ``dim = 3`` a file of triangles only, such as an STL, OBJ or PLY surface, is
+    taken as a closed surface and filled with tetrahedra of edge ``element_size``
+    (:func:`check_surface`, :func:`fem_anim.meshes.build_volume_from_surface`).
+
+    Raises:
+        MeshError: naming the file, if it is missing, unreadable or has no usable cells.
+    """
     import meshio
 
+    source = f"mesh file {path}"
     if not path.is_file():
-        raise MeshError(f"mesh file {path} does not exist")
+        raise MeshError(f"{source} does not exist")
+    chatter = io.StringIO()  # meshio prints warnings, and errors before sys.exit(1)
     try:
-        m = meshio.read(path)
-    except Exception as err:  # meshio raises many types for malformed files
-        raise MeshError(f"mesh file {path} cannot be read: {err}") from None
-    name = CELL_NAMES[dim]
-    blocks = [b.data for b in m.cells if b.type == name]
-    if not blocks:
-        raise MeshError(f"mesh file {path} has no {name} cells (mesh.dim = {dim})")
-    cells = np.concatenate(blocks).astype(np.int64)
-    markers = None
-    for key in ("gmsh:physical", "medit:ref", "cell_markers"):
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+            m = meshio.read(path)
+    except SystemExit:  # meshio's end when no reader for the extension accepts the file
+        detail = " ".join(chatter.getvalue().replace("Error:", "").split())
+        raise MeshError(f"{source} cannot be read: {detail or 'meshio gave up'}") from None
+    except Exception as err:  # noqa: BLE001 (meshio raises many types for malformed files)
+        detail = " ".join(str(err).split()) or type(err).__name__
+        raise MeshError(f"{source} cannot be read: {detail}") from None
+    points = np.asarray(m.points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
+        raise MeshError(f"{source}: points must have 2 or 3 coordinates, got shape "
+                        f"{points.shape}")
+    found = sorted({b.type for b in m.cells}) or ["none"]
+    take = [k for k, b in enumerate(m.cells) if b.type in MESHIO_TYPES[dim]]
+    surface = [b.data[:, :3] for b in m.cells if b.type in MESHIO_TYPES[2]]
+    if not take and dim == 3 and surface:
+        points, triangles = _compact(points, np.concatenate(surface).astype(np.int64))
+        if points.shape[1] != 3 or np.ptp(points[:, 2]) == 0.0:
+            raise MeshError(f"{source} is a plane triangle mesh without tetrahedra; set "
+                            "mesh.dim = 2 for it (a surface to fill must be closed)")
+        return _fill_surface(points, triangles, element_size, source)
+    if not take:
+        raise MeshError(f"{source} has no {CELL_NAMES[dim]} cells for mesh.dim = {dim} (cell "
+                        f"types found: {', '.join(found)})")
+    cells = np.concatenate([m.cells[k].data[:, :dim + 1] for k in take]).astype(np.int64)
+    markers = np.ones(cells.shape[0], dtype=np.int32)
+    for key in MARKER_KEYS:
         if key in m.cell_data:
-            markers = np.concatenate([d for b, d in zip(m.cells, m.cell_data[key])
-                                      if b.type == name]).astype(np.int32)
+            markers = np.concatenate([np.asarray(m.cell_data[key][k]).reshape(-1)
+                                      for k in take]).astype(np.int32)
             break
-    points = np.asarray(m.points, dtype=np.float64)[:, :dim]
-    if markers is None:
-        markers = np.ones(cells.shape[0], dtype=np.int32)
+    if dim == 2 and points.shape[1] == 3:
+        z = points[np.unique(cells[(cells >= 0) & (cells < len(points))]), 2]
+        if z.size and np.ptp(z) > 1e-12 * max(np.ptp(points[:, :2], axis=0).max(), 1e-300):
+            raise MeshError(f"{source}: its triangles do not lie in a plane z = const, as "
+                            "mesh.dim = 2 needs (for a closed surface use mesh.dim = 3)")
+    points, cells = _compact(points[:, :dim], cells)
     return points, cells, markers
 
 
@@ -194,7 +453,7 @@ def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
                 path = Path(cfg["file"])
                 path = path if path.is_absolute() else scene.base_dir / path
                 source = f"mesh file {path}"
-                points, cells, markers = _read_file(path, d)
+                points, cells, markers = read_mesh_file(path, d, cfg["element_size"])
             else:
                 points, cells, markers = _build_gmsh(cfg)
         except MeshError as err:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from .common import boundary_of, entities_in_box, name_group, padded_origin
+
 __all__ = ["build_box"]
 
 
@@ -11,8 +13,9 @@ def build_box(model, size: Sequence[float], element_size: float,
               origin: Sequence[float] | None = None):
     """Mesh the box ``origin + [0, size]`` with simplices of target edge ``element_size``.
 
-    Physical groups: ``body`` (the volume, tag 1) and one per side, ``xmin``, ``xmax``,
-    ``ymin``, ``ymax`` (and ``zmin``, ``zmax`` in 3D), for scenes to refer to.
+    Physical groups: ``body`` (the volume, tag 1), ``surface`` (the whole boundary, tag 1 in
+    dimension ``dim - 1``) and one per side, ``xmin``, ``xmax``, ``ymin``, ``ymax`` (and
+    ``zmin``, ``zmax`` in 3D; tags 2 to 7), for scenes to refer to.
 
     Args:
         model: ``gmsh.model`` of an initialised gmsh session.
@@ -24,26 +27,23 @@ def build_box(model, size: Sequence[float], element_size: float,
         The model, meshed.
     """
     dim = len(size)
-    origin = list(origin) if origin is not None else [0.0] * dim
+    lo = padded_origin(origin, dim)
+    hi = [o + s for o, s in zip(lo, list(size) + [0.0] * (3 - dim))]
     model.add("box")
     if dim == 3:
-        tag = model.occ.addBox(*origin, *size)
+        tag = model.occ.addBox(*lo, *size)
     else:
-        tag = model.occ.addRectangle(*origin, 0.0, *size)
+        tag = model.occ.addRectangle(*lo, *size)
     model.occ.synchronize()
-    model.addPhysicalGroup(dim, [tag], 1)
-    model.setPhysicalName(dim, 1, "body")
+    name_group(model, dim, [tag], 1, "body")
+    name_group(model, dim - 1, boundary_of(model, dim, [tag]), 1, "surface")
     names = ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"]
-    eps = 1e-9 * max(size)
     for side, name in enumerate(names[: 2 * dim]):
         axis, upper = divmod(side, 2)
-        lo = [o - eps for o in origin] + [-eps] * (3 - dim)
-        hi = [o + s + eps for o, s in zip(origin, size)] + [eps] * (3 - dim)
-        plane = origin[axis] + (size[axis] if upper else 0.0)
-        lo[axis], hi[axis] = plane - eps, plane + eps
-        faces = [t for _, t in model.getEntitiesInBoundingBox(*lo, *hi, dim - 1)]
-        group = model.addPhysicalGroup(dim - 1, faces, side + 2)
-        model.setPhysicalName(dim - 1, group, name)
-    model.mesh.setSize(model.getEntities(0), element_size)
+        plane_lo, plane_hi = list(lo), list(hi)
+        plane_lo[axis] = plane_hi[axis] = hi[axis] if upper else lo[axis]
+        faces = entities_in_box(model, dim - 1, plane_lo, plane_hi, max(size))
+        name_group(model, dim - 1, faces, side + 2, name)
+    model.mesh.setSize(model.getEntities(0), element_size)  # flat faces: points suffice
     model.mesh.generate(dim)
     return model
