@@ -17,7 +17,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .errors import FemAnimError
+from .errors import ConvergenceError, FemAnimError
 from .petsc_options import init_petsc, split_petsc_args
 
 __all__ = ["main", "build_parser"]
@@ -40,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
                      metavar="KEY=VALUE", help="override a scene key (value parsed as TOML)")
     run.add_argument("--solver", help="linear solver preset (see `fem-anim solvers`)")
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--resume", metavar="OUTDIR",
+                     help="continue the unfinished run in OUTDIR from its last checkpoint")
     sub.add_parser("solvers", help="list the linear solver presets and their PETSc options")
     return parser
 
@@ -47,8 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
 def _print_error(message: str) -> None:
     from mpi4py import MPI
 
-    if MPI.COMM_WORLD.rank == 0:
-        print(f"fem-anim: error: {message}", file=sys.stderr, flush=True)
+    if MPI.COMM_WORLD.rank == 0:  # one line: control characters (a newline in a key) escaped
+        line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+        print(f"fem-anim: error: {line}", file=sys.stderr, flush=True)
 
 
 def _quiet_jit_logging() -> None:
@@ -67,12 +70,19 @@ def _run(args, cli_options: dict[str, str]) -> int:
     from .scene import load_scene
 
     scene = load_scene(args.scene, args.overrides)  # validate before importing dolfinx
+    out = args.resume or args.output or scene["output"]["directory"] or f"out/{scene.name}"
+    if Path(out).exists() and not Path(out).is_dir():
+        raise FemAnimError(f"output directory {out} exists and is not a directory")
     from .simulation import Simulation
 
     _quiet_jit_logging()
-    out = args.output or scene["output"]["directory"] or f"out/{scene.name}"
     sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
-    result = sim.run(Path(out), quiet=args.quiet)
+    try:
+        result = sim.run(Path(out), quiet=args.quiet, resume=args.resume is not None)
+    except ConvergenceError as err:
+        raise ConvergenceError(f"{err}; the frames so far and the last checkpoint are kept in "
+                               f"{out}/.partial: continue with --resume {out} (e.g. with other "
+                               "solver options)") from None
     if MPI.COMM_WORLD.rank == 0 and not args.quiet:
         last = result.rows[-1]
         print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "

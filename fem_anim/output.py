@@ -13,7 +13,6 @@ meshio read it), ``stats.csv`` (one row per step), ``final.vtu`` (point data
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import os
 import shutil
@@ -23,10 +22,11 @@ import numpy as np
 from mpi4py import MPI
 
 from . import compat
+from .errors import FemAnimError
 from .mesh import SimplexMesh
 
 __all__ = ["VertexGather", "RunDirectory", "StatsWriter", "TrajectoryWriter", "write_final",
-           "STATS_COLUMNS"]
+           "write_atomically", "STATS_COLUMNS"]
 
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "newton_decrement", "shift", "kinetic", "elastic", "gravity",
@@ -73,22 +73,35 @@ def _pad3(a: np.ndarray) -> np.ndarray:
 class RunDirectory:
     """The output directory with a staging area; only rank 0 touches the file system."""
 
-    def __init__(self, path: Path, comm: MPI.Comm):
+    def __init__(self, path: Path, comm: MPI.Comm, resume: bool = False):
         self.path = Path(path)
         self.comm = comm
         self.staging = self.path / ".partial"
-        if comm.rank == 0:
-            if self.staging.exists():
-                shutil.rmtree(self.staging)
-            self.staging.mkdir(parents=True)
+        if resume:
+            exists = comm.bcast(self.staging.is_dir() if comm.rank == 0 else None, root=0)
+            if not exists:
+                raise FemAnimError(f"nothing to resume in {self.path}: no unfinished run there")
+        else:
+            error = None
+            if comm.rank == 0:
+                try:
+                    if self.staging.exists():
+                        shutil.rmtree(self.staging)
+                    self.staging.mkdir(parents=True)
+                except OSError as err:
+                    error = f"output directory {self.path} cannot be written: {err.strerror}"
+            error = comm.bcast(error, root=0)  # decided on rank 0, raised on every rank
+            if error:
+                raise FemAnimError(error)
 
     def file(self, name: str) -> Path:
         """Where to write ``name`` while the run is in progress."""
         return self.staging / name
 
     def commit(self) -> None:
-        """Move every staged file into place (each rename is atomic)."""
+        """Move every staged file into place (each rename is atomic); drop the checkpoint."""
         if self.comm.rank == 0:
+            (self.staging / "checkpoint.npz").unlink(missing_ok=True)
             for item in self.staging.iterdir():
                 os.replace(item, self.path / item.name)
             self.staging.rmdir()
@@ -107,12 +120,14 @@ class RunDirectory:
 class StatsWriter:
     """``stats.csv``: one row per completed step, flushed as it is written (rank 0)."""
 
-    def __init__(self, path: Path, comm: MPI.Comm):
+    def __init__(self, path: Path, comm: MPI.Comm, rows: list[dict] = ()):
         self.rank0 = comm.rank == 0
         if self.rank0:
             self._file = open(path, "w", newline="")
             self._writer = csv.DictWriter(self._file, fieldnames=STATS_COLUMNS)
             self._writer.writeheader()
+            for row in rows:  # a resumed run: the rows up to its checkpoint
+                self.write(row)
 
     def write(self, row: dict) -> None:
         if self.rank0:
@@ -124,29 +139,85 @@ class StatsWriter:
             self._file.close()
 
 
+def write_atomically(path: Path, data: bytes) -> None:
+    """Write a file so that it is either complete or absent: temp file, fsync, rename."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
 class TrajectoryWriter:
-    """``trajectory.xdmf`` + ``.h5``: the displacement at each written frame (rank 0)."""
+    """``trajectory.xdmf`` + ``.h5``: the displacement at each written frame (rank 0).
 
-    def __init__(self, path: Path, domain: SimplexMesh):
+    The layout is meshio's (``data0`` points, ``data1`` cells, ``data{k+2}`` frame k), so
+    meshio's TimeSeriesReader and ParaView read it. Each frame is flushed to the HDF5 file
+    and the small XDMF file is rewritten atomically, listing only complete frames: after
+    a kill between frames the pair is readable, and :meth:`reopen` continues it.
+    """
+
+    CELL_TYPES = {3: ("triangle", "Triangle"), 4: ("tetra", "Tetrahedron")}
+
+    def __init__(self, path: Path, domain: SimplexMesh, keep_frames: int | None = None):
         self.rank0 = domain.mesh.comm.rank == 0
-        if self.rank0:
-            import meshio
+        self.path = Path(path)
+        self.times: list[float] = []
+        if not self.rank0:
+            return
+        import h5py
 
-            path = Path(path).resolve()
-            self._writer = meshio.xdmf.TimeSeriesWriter(str(path))
-            # meshio 5.3 opens the .h5 by bare file name, i.e. in the working directory.
-            with contextlib.chdir(path.parent):
-                self._writer.__enter__()
-            cell_type = {2: "triangle", 3: "tetra"}[domain.points.shape[1]]
-            self._writer.write_points_cells(_pad3(domain.points), [(cell_type, domain.cells)])
+        self.points = _pad3(domain.points)
+        self.cells = domain.cells
+        if keep_frames is None:
+            self.h5 = h5py.File(self.path.with_suffix(".h5"), "w")
+            self.h5.create_dataset("data0", data=self.points)
+            self.h5.create_dataset("data1", data=self.cells)
+        else:  # continue a run: keep its first frames, drop the rest
+            self.h5 = h5py.File(self.path.with_suffix(".h5"), "a")
+            self.times = [float(t) for t in self.h5.attrs["times"][:keep_frames]]
+            for k in range(keep_frames, len(self.h5.attrs["times"])):
+                del self.h5[f"data{k + 2}"]
+            self._sync()
 
     def write(self, time: float, displacement: np.ndarray | None) -> None:
-        if self.rank0:
-            self._writer.write_data(time, point_data={"displacement": _pad3(displacement)})
+        if not self.rank0:
+            return
+        self.h5.create_dataset(f"data{len(self.times) + 2}", data=_pad3(displacement))
+        self.times.append(time)
+        self._sync()
+
+    def _sync(self) -> None:
+        self.h5.attrs["times"] = np.asarray(self.times)
+        self.h5.flush()
+        write_atomically(self.path, self._xdmf().encode())
+
+    def _xdmf(self) -> str:
+        h5 = self.path.with_suffix(".h5").name
+        n, m = self.points.shape[0], self.cells.shape[0]
+        topology = self.CELL_TYPES[self.cells.shape[1]][1]
+        mesh = ('xpointer(//Grid[@Name=&quot;mesh&quot;]/*[self::Topology or '
+                'self::Geometry])')
+        frames = "".join(
+            f'<Grid><xi:include xpointer="{mesh}" /><Time Value="{t!r}" />'
+            f'<Attribute Name="displacement" AttributeType="Vector" Center="Node">'
+            f'<DataItem DataType="Float" Dimensions="{n} 3" Format="HDF" Precision="8">'
+            f"{h5}:/data{k + 2}</DataItem></Attribute></Grid>"
+            for k, t in enumerate(self.times))
+        return (
+            '<Xdmf xmlns:xi="http://www.w3.org/2003/XInclude" Version="3.0"><Domain>'
+            '<Grid Name="TimeSeries_fem_anim" GridType="Collection" CollectionType="Temporal">'
+            f'{frames}</Grid><Grid Name="mesh" GridType="Uniform"><Geometry GeometryType="XYZ">'
+            f'<DataItem DataType="Float" Dimensions="{n} 3" Format="HDF" Precision="8">'
+            f'{h5}:/data0</DataItem></Geometry><Topology TopologyType="{topology}" '
+            f'NumberOfElements="{m}"><DataItem DataType="Int" Dimensions="{m} '
+            f'{self.cells.shape[1]}" Format="HDF" Precision="8">{h5}:/data1</DataItem>'
+            "</Topology></Grid></Domain></Xdmf>\n")
 
     def close(self) -> None:
         if self.rank0:
-            self._writer.__exit__(None, None, None)
+            self.h5.close()
 
 
 def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None) -> None:

@@ -15,10 +15,10 @@ class Progress:
 
             self._bar = tqdm(total=total, unit="step", desc="fem-anim", dynamic_ncols=True)
 
-    def update(self, newton_its: int) -> None:
+    def update(self, newton_its: int, advance: int = 1) -> None:
         if self._bar is not None:
             self._bar.set_postfix(newton=newton_its, refresh=False)
-            self._bar.update(1)
+            self._bar.update(advance)
 
     def close(self) -> None:
         if self._bar is not None:

@@ -13,6 +13,9 @@ terms (``gravity``, ``pin``) exist only when the scene declares them.
 from __future__ import annotations
 
 import math
+import os
+import re
+import stat
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -30,6 +33,18 @@ INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
 NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
 MAX_MAGNITUDE = 1.0e150  # larger values are taken as a typo or an attack, not physics
+MAX_CELLS = 2.0e7  # ~24 GB of memory for a P1 Newton step; larger is a typo, not a scene
+MAX_STEPS = 10**9  # frames; more is a typo (at 60 frames/s, 190 days of animation)
+MAX_FILE_BYTES = 1 << 20  # a scene is a page of TOML; refuse to slurp anything bigger
+MAX_STRING = 1024  # characters in any string value (paths included)
+#: ``name`` becomes the directory ``out/<name>``: one file-name-safe token, no separators.
+NAME_PATTERN = re.compile(r"\w[\w.-]{0,99}")
+#: PETSc option names (the parts joined by ``_`` when ``[solver.petsc]`` is flattened).
+PETSC_KEY = re.compile(r"[A-Za-z0-9_]+")
+#: PETSc viewers that write files or open connections: a scene may not name them
+#: (``ksp_view_mat = "binary:/elsewhere"``); the command line may.
+PETSC_WRITING_VIEWERS = ("binary", "hdf5", "vtk", "vtu", "matlab", "socket", "saws", "adios",
+                         "exodusii", "glvis", "mathematica", "pythonviewer")
 
 
 @dataclass(frozen=True)
@@ -62,9 +77,87 @@ def _all_positive(v) -> str | None:
     return None if all(c > 0 for c in v) else "must have all entries > 0"
 
 
+def _steps(v) -> str | None:
+    if v < 1:
+        return "must be >= 1"
+    return None if v <= MAX_STEPS else f"must be at most {MAX_STEPS}"
+
+
+def _scene_name(v) -> str | None:
+    return None if NAME_PATTERN.fullmatch(v) else (
+        "must be a simple file name (letters, digits, '_', '-', '.'; not starting with '.' "
+        "or '-'; at most 100 characters), since it names the output directory out/<name>")
+
+
+def _output_directory(v) -> str | None:
+    """A scene may only write below the working directory (``-o`` may write anywhere)."""
+    if not v or os.path.isabs(v) or v.startswith("~"):
+        return "must be a relative path inside the working directory"
+    parts = os.path.normpath(v).split(os.sep)
+    if parts[0] == ".." or ".." in parts:
+        return "must not leave the working directory (a scene cannot make the program " \
+               "write outside its output directory; use -o)"
+    cwd = Path.cwd().resolve()
+    try:
+        inside = (cwd / v).resolve().is_relative_to(cwd)
+    except (OSError, RuntimeError):  # a symbolic link loop
+        return "must be a path that resolves (a symbolic link loops)"
+    if not inside:  # through a symbolic link
+        return "must not leave the working directory (it resolves outside it through a " \
+               "symbolic link; use -o)"
+    return None
+
+
+def _check_petsc(table: dict, path: str = "solver.petsc") -> None:
+    """PETSc options: identifier names; string, finite number or boolean values.
+
+    A viewer that writes files (``ksp_view_mat = "binary:/elsewhere"``, ``"ascii:log.txt"``)
+    is refused: a scene cannot make the program write outside its output directory.
+    """
+    for k, value in table.items():
+        where = f"{path}.{_key(k)}"
+        if not PETSC_KEY.fullmatch(k):
+            raise SceneError(f"{where}: PETSc option names are letters, digits and '_'")
+        if isinstance(value, dict):
+            _check_petsc(value, where)
+        elif not isinstance(value, (str, int, float)):  # bool is an int
+            raise SceneError(f"{where} must be a string, a number or true/false, "
+                             f"got {_show(value)}")
+        elif isinstance(value, str):
+            _check_string(where, value)
+            try:
+                number = float(value)
+            except ValueError:
+                number = 0.0
+            if not math.isfinite(number):
+                raise SceneError(f"{where} must be finite, got {_show(value)}")
+            viewer, _, rest = value.partition(":")
+            if viewer.strip().lower() in PETSC_WRITING_VIEWERS or rest.partition(":")[0]:
+                raise SceneError(f"{where} must not name a PETSc viewer that writes files "
+                                 "(give it on the command line), got " + _show(value))
+
+
+def _show(value: Any, limit: int = 200) -> str:
+    """``repr`` of a value for a message, cut short (a scene value may be megabytes)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def _key(k: str) -> str:
+    """A key as written in a dotted path; odd keys (spaces, newlines, ...) are quoted."""
+    return k if re.fullmatch(r"[\w-]{1,64}", k) else _show(k)
+
+
+def _check_string(path: str, value: str) -> None:
+    if len(value) > MAX_STRING:
+        raise SceneError(f"{path} must be at most {MAX_STRING} characters, got {_show(value)}")
+    if any(ord(c) < 32 or ord(c) == 127 for c in value):
+        raise SceneError(f"{path} must not contain control characters, got {_show(value)}")
+
+
 NUM = (int, float)
 SCHEMA: dict[str, dict[str, Key]] = {
-    "": {"name": Key(str, "scene")},
+    "": {"name": Key(str, "scene", _scene_name)},
     "mesh": {
         "shape": Key(str, "box", _one_of(MESH_SHAPES)),
         "dim": Key(int, 3, _one_of((2, 3))),
@@ -91,7 +184,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "time": {
         "integrator": Key(str, "newmark", _one_of(INTEGRATORS)),
         "dt": Key(NUM, 1.0 / 60.0, _positive),
-        "steps": Key(int, 60, lambda v: None if v >= 1 else "must be >= 1"),
+        "steps": Key(int, 60, _steps),
         "adaptive": Key(bool, True),
         "min_dt": Key(NUM, None, _positive),
     },
@@ -117,11 +210,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "decrement_tol": Key(NUM, 1e-14, _positive),
         "hessian": Key(str, "exact", _one_of(("exact", "shift", "project"))),
         "inversion_filter": Key(bool, None),
-        "petsc": Key(dict, {}),
+        "petsc": Key(dict, {}, _check_petsc),
     },
     "output": {
-        "directory": Key(str, None),
+        "directory": Key(str, None, _output_directory),
         "every": Key(int, 1, lambda v: None if v >= 1 else "must be >= 1"),
+        "checkpoint_every": Key(int, None, lambda v: None if v >= 1 else "must be >= 1"),
         "render": Key(bool, True),
     },
 }
@@ -172,10 +266,10 @@ def parse_override(text: str) -> tuple[list[str], Any]:
         raise SceneError(f"--set expects KEY=VALUE, got {text!r}")
     key, raw = text.split("=", 1)
     path = key.strip().split(".")
-    if not all(path):
+    if not all(re.fullmatch(r"[\w-]+", part) for part in path):
         raise SceneError(f"--set key {key!r} is not a dotted key path")
     try:
-        value = tomllib.loads(f"v = {raw}")["v"]
+        value = _parse_toml(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
         if raw.strip().replace("_", "").replace("-", "").isalnum():
             value = raw.strip()
@@ -187,12 +281,18 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 def _apply_override(data: dict, path: list[str], value: Any) -> None:
     node = data
     for i, part in enumerate(path[:-1]):
-        if part.isdigit() and isinstance(node, list):
+        if isinstance(node, list):
+            if not part.isdecimal():
+                raise SceneError(f"--set {'.'.join(path)}: {'.'.join(path[:i])} is a list; "
+                                 f"give an entry number, e.g. {'.'.join(path[:i])}.0")
             idx = int(part)
             if idx >= len(node):
                 raise SceneError(f"--set {'.'.join(path)}: there is no entry {idx} in "
                                  f"{'.'.join(path[:i])}")
             node = node[idx]
+            if not isinstance(node, (dict, list)):
+                raise SceneError(f"--set {'.'.join(path)}: {'.'.join(path[:i + 1])} is not a "
+                                 "table")
             continue
         nxt = node.setdefault(part, {})
         if not isinstance(nxt, (dict, list)):
@@ -215,25 +315,29 @@ def _check_finite(path: str, value: Any) -> None:
     if isinstance(value, bool):
         return
     if isinstance(value, (int, float)):
-        if not math.isfinite(value):
+        if isinstance(value, float) and not math.isfinite(value):
             raise SceneError(f"{path} must be finite, got {value}")
         if abs(value) > MAX_MAGNITUDE:
+            shown = f"{value:g}" if isinstance(value, float) else _show(value)
             raise SceneError(f"{path} must be at most {MAX_MAGNITUDE:g} in magnitude, "
-                             f"got {value:g}")
+                             f"got {shown}")
+        if value and abs(value) < 1.0 / MAX_MAGNITUDE:  # dt / 256 would underflow to 0
+            raise SceneError(f"{path} must be 0 or at least {1.0 / MAX_MAGNITUDE:g} in "
+                             f"magnitude, got {value:g}")
     elif isinstance(value, list):
         for i, v in enumerate(value):
             _check_finite(f"{path}[{i}]", v)
     elif isinstance(value, dict):
         for k, v in value.items():
-            _check_finite(f"{path}.{k}", v)
+            _check_finite(f"{path}.{_key(k)}", v)
 
 
 def _validate_table(section: str, table: Any, keys: dict[str, Key], where: str) -> dict:
     if not isinstance(table, dict):
-        raise SceneError(f"{where} must be a table, got {table!r}")
+        raise SceneError(f"{where} must be a table, got {_show(table)}")
     for k in table:
         if k not in keys:
-            raise SceneError(f"unknown key {where}.{k} (known: {', '.join(keys)})".replace(
+            raise SceneError(f"unknown key {where}.{_key(k)} (known: {', '.join(keys)})".replace(
                 "unknown key .", "unknown key "))
     out = {}
     for k, key in keys.items():
@@ -248,15 +352,17 @@ def _validate_table(section: str, table: Any, keys: dict[str, Key], where: str) 
         if key.kind is NUM and isinstance(value, bool):
             ok = False
         if not ok:
-            raise SceneError(f"{path} must be {_type_name(key.kind)}, got {value!r}")
+            raise SceneError(f"{path} must be {_type_name(key.kind)}, got {_show(value)}")
         _check_finite(path, value)
+        if isinstance(value, str):
+            _check_string(path, value)
         if key.length is not None:
             if len(value) not in key.length or not all(
                     isinstance(c, NUM) and not isinstance(c, bool) for c in value):
                 raise SceneError(f"{path} must be a list of {' or '.join(map(str, key.length))}"
-                                 f" numbers, got {value!r}")
+                                 f" numbers, got {_show(value)}")
         if key.check is not None and (msg := key.check(value)):
-            raise SceneError(f"{path} {msg}, got {value!r}")
+            raise SceneError(f"{path} {msg}, got {_show(value)}")
         out[k] = value
     return out
 
@@ -265,7 +371,7 @@ def _validate(raw: Mapping[str, Any]) -> dict[str, Any]:
     known = ["name"] + [section for section in SCHEMA if section]
     for name in raw:
         if name not in known:
-            raise SceneError(f"unknown section or key {name!r} (known: {', '.join(known)})")
+            raise SceneError(f"unknown section or key {_show(name)} (known: {', '.join(known)})")
     data = _validate_table("", {"name": raw["name"]} if "name" in raw else {}, SCHEMA[""], "")
     for section, keys in SCHEMA.items():
         if not section:
@@ -273,7 +379,8 @@ def _validate(raw: Mapping[str, Any]) -> dict[str, Any]:
         if section in ARRAY_SECTIONS:
             entries = raw.get(section, [])
             if not isinstance(entries, list):
-                raise SceneError(f"{section} must be an array of tables ([[{section}]])")
+                raise SceneError(f"{section} must be an array of tables ([[{section}]]), "
+                                 f"got {_show(entries)}")
             data[section] = [_validate_table(section, e, keys, f"{section}[{i}]")
                              for i, e in enumerate(entries)]
         elif section in OPTIONAL_SECTIONS:
@@ -283,6 +390,21 @@ def _validate(raw: Mapping[str, Any]) -> dict[str, Any]:
             data[section] = _validate_table(section, raw.get(section, {}), keys, section)
     _check_consistency(data)
     return data
+
+
+def _estimated_cells(mesh: dict[str, Any]) -> float:
+    """A rough count of the simplices gmsh makes (d! per cube of the element size)."""
+    d, h = mesh["dim"], mesh["element_size"]
+    r, length, a = mesh["radius"], mesh["length"], mesh["minor_radius"]
+    measure = {
+        "box": math.prod(mesh["size"]) if len(mesh["size"]) == d else 0.0,
+        "sphere": (4 / 3 * math.pi * r ** 3) if d == 3 else math.pi * r ** 2,
+        "cylinder": (math.pi * r ** 2 * length) if d == 3 else 2 * r * length,
+        "torus": (2 * math.pi ** 2 * r * a ** 2) if d == 3 else 4 * math.pi * r * a,
+        "capsule": (math.pi * r ** 2 * (length + 4 / 3 * r)) if d == 3
+        else 2 * r * length + math.pi * r ** 2,
+    }.get(mesh["shape"], 0.0)
+    return measure / h ** d * math.factorial(d)
 
 
 def _check_consistency(data: dict[str, Any]) -> None:
@@ -299,6 +421,14 @@ def _check_consistency(data: dict[str, Any]) -> None:
     if mesh["shape"] == "box" and mesh["element_size"] > max(mesh["size"]):
         raise SceneError(f"mesh.element_size must not exceed the box size "
                          f"{max(mesh['size'])}, got {mesh['element_size']}")
+    if mesh["shape"] == "torus" and mesh["minor_radius"] >= mesh["radius"]:
+        raise SceneError(f"mesh.minor_radius must be < mesh.radius = {mesh['radius']}, got "
+                         f"{mesh['minor_radius']}")
+    cells = _estimated_cells(mesh)
+    if cells > MAX_CELLS:
+        raise SceneError(f"mesh.element_size = {mesh['element_size']} would make about "
+                         f"{cells:.2g} cells for this {mesh['shape']} (at most {MAX_CELLS:.0e}); "
+                         "use a larger element size")
     if "gravity" in data and len(data["gravity"]["acceleration"]) != d:
         raise SceneError(f"gravity.acceleration must have {d} entries for mesh.dim = {d}, "
                          f"got {data['gravity']['acceleration']}")
@@ -333,8 +463,46 @@ def _check_consistency(data: dict[str, Any]) -> None:
             "newton", "trust_region"):
         raise SceneError(f"solver.hessian = \"{data['solver']['hessian']}\" modifies Newton's "
                          f"Hessian; solver.method = \"{data['solver']['method']}\" uses none")
-    if not isinstance(data["solver"]["petsc"], dict):
-        raise SceneError("solver.petsc must be a table of PETSc options")
+
+
+def _parse_toml(text: str) -> dict[str, Any]:
+    """``tomllib.loads``, with its non-TOML failures turned into ``TOMLDecodeError``."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise tomllib.TOMLDecodeError("arrays or tables nested too deeply") from None
+    except ValueError as err:  # an integer longer than Python converts (4300 digits)
+        if isinstance(err, tomllib.TOMLDecodeError):
+            raise
+        raise tomllib.TOMLDecodeError(f"a number has too many digits ({err})".split(
+            "; use sys.set_int_max_str_digits")[0]) from None
+
+
+def _read_scene_file(p: Path) -> str:
+    """The text of a scene file: a regular UTF-8 file of at most ``MAX_FILE_BYTES``."""
+    try:
+        mode = p.stat().st_mode
+    except FileNotFoundError:
+        raise SceneError(f"scene file {p} does not exist") from None
+    except OSError as err:
+        raise SceneError(f"scene file {p} cannot be read: {err.strerror}") from None
+    if stat.S_ISDIR(mode):
+        raise SceneError(f"scene file {p} is a directory")
+    if not stat.S_ISREG(mode):  # a FIFO or device would block or never end
+        raise SceneError(f"scene file {p} is not a regular file")
+    try:
+        with open(p, "rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as err:
+        raise SceneError(f"scene file {p} cannot be read: {err.strerror}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise SceneError(f"scene file {p} is larger than {MAX_FILE_BYTES} bytes: not a scene")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise SceneError(f"scene file {p} is not UTF-8 text (byte {err.start}: "
+                         f"{data[err.start:err.start + 1]!r})") from None
+    return text
 
 
 def load_scene(path: str | Path | None = None, overrides: list[str] = ()) -> Scene:
@@ -347,17 +515,14 @@ def load_scene(path: str | Path | None = None, overrides: list[str] = ()) -> Sce
         text, source, base = default_scene_text(), "<default scene>", Path.cwd()
     else:
         p = Path(path)
-        try:
-            text = p.read_text()
-        except FileNotFoundError:
-            raise SceneError(f"scene file {p} does not exist") from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise SceneError(f"scene file {p} cannot be read: {err}") from None
+        text = _read_scene_file(p)
         source, base = str(p), p.resolve().parent
     try:
-        raw = tomllib.loads(text)
+        raw = _parse_toml(text)
     except tomllib.TOMLDecodeError as err:
         raise SceneError(f"scene file {source} is not valid TOML: {err}") from None
+    if not raw and path is not None:  # an empty file is a mistake, not the defaults
+        raise SceneError(f"scene file {source} is empty (no keys)")
     for item in overrides:
         key_path, value = parse_override(item)
         _apply_override(raw, key_path, value)

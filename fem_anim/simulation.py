@@ -21,6 +21,7 @@ from petsc4py import PETSc
 from dolfinx.fem import petsc as fem_petsc
 
 from . import compat
+from .checkpoint import load_checkpoint, save_checkpoint
 from .errors import ConvergenceError, FemAnimError
 from .integrator import Integrator, State
 from .mesh import SimplexMesh, build_mesh
@@ -205,13 +206,23 @@ class Simulation:
                                    "time.dt")
 
     # -- the run --------------------------------------------------------------------------
-    def run(self, output_dir: Path | None = None, quiet: bool = False) -> RunResult:
-        """Run ``time.steps`` steps, writing outputs to ``output_dir`` (None: no files)."""
+    def run(self, output_dir: Path | None = None, quiet: bool = False,
+            resume: bool = False) -> RunResult:
+        """Run ``time.steps`` frames, writing outputs to ``output_dir`` (None: no files).
+
+        With ``resume``, continue the unfinished run in ``output_dir`` from its last
+        checkpoint (:mod:`fem_anim.checkpoint`). A run that fails leaves its staging area
+        (frames so far and the last checkpoint) for ``--resume``, but no file posing as a
+        result in ``output_dir``.
+        """
         cfg = self.scene["time"]
         h, steps, every = cfg["dt"], cfg["steps"], self.scene["output"]["every"]
-        run_dir = RunDirectory(output_dir, self.comm) if output_dir is not None else None
+        run_dir = RunDirectory(output_dir, self.comm, resume) if output_dir is not None \
+            else None
         try:
-            result = self._loop(h, steps, every, run_dir, quiet)
+            result = self._loop(h, steps, every, run_dir, quiet, resume)
+        except FemAnimError:
+            raise  # keep the staging area and its checkpoint: the run can be resumed
         except BaseException:
             if run_dir is not None:
                 run_dir.abandon()
@@ -220,24 +231,38 @@ class Simulation:
             run_dir.commit()
         return result
 
-    def _loop(self, h, steps, every, run_dir, quiet) -> RunResult:
-        stats_file = StatsWriter(run_dir.file("stats.csv"), self.comm) if run_dir else None
-        trajectory = TrajectoryWriter(run_dir.file("trajectory.xdmf"), self.domain) \
-            if run_dir else None
-        state = self.initial_state()
-        rows = []
-        progress = Progress(steps, disable=quiet or self.comm.rank != 0)
+    def _loop(self, h, steps, every, run_dir, quiet, resume) -> RunResult:
         stepper = AdaptiveStepper(self, h, self.scene["time"])
+        checkpoint_every = self.scene["output"]["checkpoint_every"] or max(1, steps // 10)
+        first, rows, kept = 1, [], None
+        if resume:
+            ck = load_checkpoint(run_dir.file("checkpoint.npz"), self)
+            state, first, rows, kept = ck.state, ck.frame + 1, ck.rows, ck.frames_written
+            stepper.dt, stepper.last_dt = ck.stepper["dt"], ck.stepper["last_dt"]
+            if self.minimiser.shift:
+                self.minimiser.shift.c = ck.shift
+        else:
+            state = self.initial_state()
+        stats_file = StatsWriter(run_dir.file("stats.csv"), self.comm, rows) if run_dir \
+            else None
+        trajectory = TrajectoryWriter(run_dir.file("trajectory.xdmf"), self.domain, kept) \
+            if run_dir else None
+        progress = Progress(steps, disable=quiet or self.comm.rank != 0)
+        progress.update(0, advance=first - 1)
         try:
-            if trajectory:
+            if trajectory and not resume:
                 trajectory.write(0.0, self.gather.gather(state.u))
-            for frame in range(1, steps + 1):
+            for frame in range(first, steps + 1):
                 for state, row in stepper.advance(state, frame * h):
                     rows.append(row)
                     if stats_file:
                         stats_file.write(row)
                 if trajectory and (frame % every == 0 or frame == steps):
                     trajectory.write(state.time, self.gather.gather(state.u))
+                if run_dir and frame % checkpoint_every == 0 and frame < steps:
+                    save_checkpoint(run_dir.file("checkpoint.npz"), self, state, frame,
+                                    len(trajectory.times) if trajectory.rank0 else 0, rows,
+                                    {"dt": stepper.dt, "last_dt": stepper.last_dt})
                 progress.update(row["newton_its"])
         finally:
             progress.close()

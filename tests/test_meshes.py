@@ -22,7 +22,7 @@ from mpi4py import MPI
 
 from fem_anim import meshes
 from fem_anim.cli import main
-from fem_anim.errors import MeshError
+from fem_anim.errors import MeshError, SceneError
 from fem_anim.mesh import build_mesh, check_cells, check_surface, mesh_from_arrays
 from fem_anim.reference.mesh import box_mesh
 from fem_anim.scene import MESH_SHAPES, SCHEMA, load_scene
@@ -138,8 +138,8 @@ def test_registry_matches_the_scene_schema():
         assert set(keys) <= set(SCHEMA["mesh"]), shape
 
 
-def test_torus_tube_crossing_its_axis_is_a_mesh_error():
-    with pytest.raises(MeshError, match=r"mesh \(torus\): minor_radius must be < radius"):
+def test_torus_tube_crossing_its_axis_is_rejected_with_the_scene():
+    with pytest.raises(SceneError, match=r"mesh.minor_radius must be < mesh.radius = 0.1"):
         build(scene_with('mesh.shape="torus"', "mesh.radius=0.1", "mesh.minor_radius=0.1"))
 
 
