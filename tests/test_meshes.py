@@ -29,7 +29,7 @@ from fem_anim.scene import MESH_SHAPES, SCHEMA, load_scene
 
 DATA = ROOT / "meshes" / "data"
 sys.path.insert(0, str(DATA))
-from make_examples import cube_surface
+from make_examples import cube_surface  # noqa: E402 (the examples script lives with its data)
 
 R, L, r = 0.1, 0.3, 0.04  # radius, length, minor radius (m)
 PRIMITIVES = ("sphere", "cylinder", "torus", "capsule")
@@ -345,7 +345,8 @@ def bad(kind):
         return points, cells, rf"cell {len(cells) - 1} \(vertices .*\) duplicates cell 3"
     if kind == "inverted":
         points, cells = folded_box()
-        return points, cells, r"cell \d+ is inverted: it folds over cell \d+ across their shared face"
+        return (points, cells,
+                r"cell \d+ is inverted: it folds over cell \d+ across their shared face")
     raise ValueError(kind)
 
 
