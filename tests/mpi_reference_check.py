@@ -46,8 +46,12 @@ from fem_anim import reference
 from fem_anim.mesh import mesh_from_arrays
 from fem_anim.output import VertexGather
 from fem_anim.problem import EnergyProblem
-from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_reference_comparison import (  # noqa: E402 (the serial test's beam scenes)
+    DENSITY, DT, GRAVITY, LENGTHS, PIN_MAX, PIN_MIN, POISSON_RATIO, YOUNGS_MODULUS,
+    write_scene)
 
 COMM = MPI.COMM_WORLD
 EPS = np.finfo(float).eps
@@ -62,55 +66,13 @@ DISPLACEMENT_RTOL = 1e-7
 MATERIALS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean")
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 DIVISIONS = {2: (4, 2), 3: (4, 2, 2)}
-LENGTHS = {2: (1.0, 0.25), 3: (1.0, 0.25, 0.25)}
-YOUNGS_MODULUS = 1.0e4  # Pa
-POISSON_RATIO = 0.3
-DENSITY = 1000.0  # kg/m^3
-GRAVITY = {2: (0.0, -9.81), 3: (0.0, -9.81, 0.0)}  # m/s^2
-PIN_MIN = {2: (-1e-6, -1.0), 3: (-1e-6, -1.0, -1.0)}  # the face x = 0
-PIN_MAX = {2: (1e-6, 1.0), 3: (1e-6, 1.0, 1.0)}
-STEPS = 10
-DT = {"newmark": 1 / 60, "implicit_euler": 1 / 60, "bdf2": 1 / 60, "symplectic_euler": 1 / 250}
+STEPS = 10  # the serial comparison runs 20; its scenes are shared (their steps unused here)
 DOLFINX_NEWTON = {"snes_rtol": "1e-12", "snes_atol": "1e-14"}
 REFERENCE_NEWTON = {"atol": 1e-12, "rtol": 1e-14}
 NUM_PROBES = 3  # random vectors z for the matrix actions
 
 
 # --- scenes and meshes ----------------------------------------------------------------------------
-
-
-def toml_list(values) -> str:
-    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
-
-
-def write_scene(directory: Path, d: int, material: str, *, mass: str = "consistent",
-                integrator: str = "newmark", pinned: bool = False):
-    """The beam scene (its ``[mesh]`` is validated but not built); each rank writes its own."""
-    name = f"{material}_{d}d_{mass}_{integrator}{'_pinned' if pinned else ''}"
-    text = f"""name = "{name}"
-[mesh]
-dim = {d}
-size = {toml_list(LENGTHS[d])}
-element_size = 0.25
-[material]
-model = "{material}"
-youngs_modulus = {YOUNGS_MODULUS}
-poisson_ratio = {POISSON_RATIO}
-density = {DENSITY}
-mass = "{mass}"
-[time]
-integrator = "{integrator}"
-dt = {DT[integrator]}
-steps = {STEPS}
-[gravity]
-acceleration = {toml_list(GRAVITY[d])}
-"""
-    if pinned:
-        text += f"[[pin]]\nname = \"wall\"\nmin = {toml_list(PIN_MIN[d])}\n" \
-                f"max = {toml_list(PIN_MAX[d])}\n"
-    path = directory / f"{name}.toml"
-    path.write_text(text)
-    return load_scene(path)
 
 
 class Beam:
