@@ -7,8 +7,10 @@ u_{n-1}, v_{n-1}), time, step and frame counters, the adaptive time-step state, 
 Hessian shift, the number of trajectory frames written and the stats rows so far. A
 resumed run therefore repeats exactly the arithmetic of an uninterrupted one.
 
-The global dof numbering depends on the mesh partition, so a checkpoint resumes on the
-same number of processes; the scene must be the same (its validated data are hashed).
+Dofs are keyed by their coordinates (quantised to 1e-9 of the mesh extent), not by the
+global dof numbering, which depends on the mesh partition and is not reproducible between
+parallel runs: a checkpoint resumes on any number of processes. The scene must be the same
+(its validated data are hashed).
 """
 
 from __future__ import annotations
@@ -49,40 +51,45 @@ class Checkpoint:
     shift: float
 
 
-def _owned_range(V) -> tuple[int, int, int]:
-    index_map = V.dofmap.index_map
+def _dof_keys(V, comm: MPI.Comm) -> np.ndarray:
+    """One key per local dof block (owned and ghost): its quantised coordinates as bytes."""
+    x = V.tabulate_dof_coordinates()
+    lo, hi = np.empty(3), np.empty(3)
+    comm.Allreduce(x.min(axis=0) if x.size else np.full(3, np.inf), lo, op=MPI.MIN)
+    comm.Allreduce(x.max(axis=0) if x.size else np.full(3, -np.inf), hi, op=MPI.MAX)
+    extent = max(float(np.max(hi - lo)), 1e-300)
+    q = np.round((x - lo) / extent * 1e9) + 0.0  # + 0.0 turns -0.0 into 0.0
+    return np.ascontiguousarray(q).view(np.dtype((np.void, q.dtype.itemsize * 3))).ravel()
+
+
+def _gather_owned(sim, values: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    V = sim.problem.V
+    n_owned = V.dofmap.index_map.size_local
     bs = V.dofmap.index_map_bs
-    start, end = index_map.local_range
-    return start * bs, end * bs, index_map.size_global * bs
-
-
-def _gather(comm: MPI.Comm, local: np.ndarray, start: int, size: int) -> np.ndarray | None:
-    parts = comm.gather((start, local), root=0)
-    if comm.rank != 0:
+    keys = _dof_keys(V, sim.comm)[:n_owned]
+    parts = sim.comm.gather((keys, values[: n_owned * bs].reshape(n_owned, bs)), root=0)
+    if sim.comm.rank != 0:
         return None
-    out = np.empty(size)
-    for offset, part in parts:
-        out[offset:offset + part.size] = part
-    return out
+    return np.concatenate([k for k, _ in parts]), np.concatenate([v for _, v in parts])
 
 
 def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: int,
                     rows: list[dict], stepper: dict) -> None:
     """Write ``path`` (rank 0) with the full state after ``frame`` frames (collective)."""
     comm = sim.comm
-    start, end, size = _owned_range(sim.problem.V)
     arrays = {}
     for name in FIELDS:
         values = getattr(state, name)
-        present = comm.allreduce(values is not None, op=MPI.LAND)
-        if present:
-            arrays[name] = _gather(comm, values[: end - start], start, size)
+        if comm.allreduce(values is not None, op=MPI.LAND):
+            gathered = _gather_owned(sim, values)
+            if gathered is not None:
+                arrays["keys"], arrays[name] = gathered
     if comm.rank != 0:
         return
     shift = sim.minimiser.shift.c if sim.minimiser.shift else 0.0
-    meta = {"scene": scene_hash(sim.scene), "ranks": comm.size, "time": state.time,
-            "step": state.step, "frame": frame, "frames_written": frames_written,
-            "stepper": stepper, "shift": shift, "rows": rows}
+    meta = {"scene": scene_hash(sim.scene), "time": state.time, "step": state.step,
+            "frame": frame, "frames_written": frames_written, "stepper": stepper,
+            "shift": shift, "rows": rows}
     buffer = io.BytesIO()
     np.savez(buffer, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
              **arrays)
@@ -90,11 +97,11 @@ def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: i
 
 
 def load_checkpoint(path: Path, sim) -> Checkpoint:
-    """Read ``path`` on every rank and scatter the state to this partition (collective).
+    """Read ``path`` on every rank and pick this partition's dofs by their keys (collective).
 
     Raises:
         FemAnimError: if the file is missing or unreadable, or was written for another
-            scene or another number of processes.
+            scene or mesh.
     """
     comm = sim.comm
     error, data = None, None
@@ -109,23 +116,18 @@ def load_checkpoint(path: Path, sim) -> Checkpoint:
     else:
         if meta["scene"] != scene_hash(sim.scene):
             error = f"checkpoint {path} was written for a different scene"
-        elif meta["ranks"] != comm.size:
-            error = (f"checkpoint {path} was written by {meta['ranks']} processes; resume it "
-                     f"with mpirun -n {meta['ranks']}")
     if comm.allreduce(error is not None, op=MPI.LOR):  # collective: every rank raises
         message = comm.bcast(error, root=0)
         raise FemAnimError(message or "the checkpoint could not be read on every process")
-    start, end, _ = _owned_range(sim.problem.V)
-    n_local = sim.problem.u.x.array.size
-    fields = {}
-    for name in FIELDS:
-        if name not in data:
-            fields[name] = None
-            continue
-        function = sim.problem.u_prev  # scratch Function to scatter owned -> ghosts
-        function.x.array[: end - start] = data[name][start:end]
-        function.x.scatter_forward()
-        fields[name] = function.x.array[:n_local].copy()
+    local = _dof_keys(sim.problem.V, comm)
+    order = np.argsort(data["keys"])
+    sorted_keys = data["keys"][order]
+    where = np.minimum(np.searchsorted(sorted_keys, local), sorted_keys.size - 1)
+    if comm.allreduce(bool(np.any(sorted_keys[where] != local)), op=MPI.LOR):
+        raise FemAnimError(f"checkpoint {path} does not match this mesh")
+    rows_of_local = order[where]
+    fields = {name: data[name][rows_of_local].ravel() if name in data else None
+              for name in FIELDS}
     state = State(**fields, time=meta["time"], step=meta["step"])
     return Checkpoint(state, meta["frame"], meta["frames_written"], meta["rows"],
                       meta["stepper"], meta["shift"])
