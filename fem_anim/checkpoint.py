@@ -62,28 +62,24 @@ def _dof_keys(V, comm: MPI.Comm) -> np.ndarray:
     return np.ascontiguousarray(q).view(np.dtype((np.void, q.dtype.itemsize * 3))).ravel()
 
 
-def _gather_owned(sim, values: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    V = sim.problem.V
-    n_owned = V.dofmap.index_map.size_local
-    bs = V.dofmap.index_map_bs
-    keys = _dof_keys(V, sim.comm)[:n_owned]
-    parts = sim.comm.gather((keys, values[: n_owned * bs].reshape(n_owned, bs)), root=0)
-    if sim.comm.rank != 0:
-        return None
-    return np.concatenate([k for k, _ in parts]), np.concatenate([v for _, v in parts])
+def _gather_owned(comm: MPI.Comm, local: np.ndarray) -> np.ndarray | None:
+    """Rank 0 gets the owned rows of every rank, concatenated in rank order."""
+    parts = comm.gather(local, root=0)
+    return np.concatenate(parts) if comm.rank == 0 else None
 
 
 def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: int,
                     rows: list[dict], stepper: dict) -> None:
     """Write ``path`` (rank 0) with the full state after ``frame`` frames (collective)."""
     comm = sim.comm
-    arrays = {}
+    V = sim.problem.V
+    n_owned = V.dofmap.index_map.size_local
+    bs = V.dofmap.index_map_bs
+    arrays = {"keys": _gather_owned(comm, _dof_keys(V, comm)[:n_owned])}
     for name in FIELDS:
         values = getattr(state, name)
         if comm.allreduce(values is not None, op=MPI.LAND):
-            gathered = _gather_owned(sim, values)
-            if gathered is not None:
-                arrays["keys"], arrays[name] = gathered
+            arrays[name] = _gather_owned(comm, values[: n_owned * bs].reshape(n_owned, bs))
     if comm.rank != 0:
         return
     shift = sim.minimiser.shift.c if sim.minimiser.shift else 0.0
