@@ -279,14 +279,28 @@ class Minimiser:
         converged as double precision allows. Uses the factorisation of the last Jacobian.
         """
         g = self.problem.objective(self.snes, x)
-        r = self.b.duplicate()
+        r, step = self.b.duplicate(), self.b.duplicate()
         self.problem.residual(self.snes, x, r)
-        step = r.duplicate()
-        self.snes.getKSP().solve(r, step)
-        decrement = 0.5 * abs(r.dot(step))
+        decrement = self.newton_step(x, r, step, assemble_hessian=False)
         r.destroy()
         step.destroy()
         return decrement <= _resolution(g, g0)
+
+    def newton_step(self, x: PETSc.Vec, r: PETSc.Vec, step: PETSc.Vec,
+                    assemble_hessian: bool = True) -> float:
+        """The full Newton step H(x)^-1 r into ``step``, for the residual ``r`` at x.
+
+        ``assemble_hessian=False`` reuses the last Hessian and its factorisation.
+
+        Returns:
+            The Newton decrement lambda^2/2 = r . step / 2 (seed definition 4).
+        """
+        ksp = self.snes.getKSP()
+        if assemble_hessian:
+            self.problem.jacobian(self.snes, x, self.A, self.A)
+            ksp.setOperators(self.A, self.A)
+        ksp.solve(r, step)
+        return 0.5 * abs(r.dot(step))
 
     def _polish(self, x: PETSc.Vec, max_steps: int = 5) -> tuple[int, float]:
         """Full Newton steps judged by the residual, where g can no longer judge them.
@@ -304,7 +318,6 @@ class Minimiser:
         target = max(atol, rtol * self._history[0][0]) if self._history else atol
         R = PETSc.SNES.ConvergedReason
         r, step, trial, r_trial = (self.b.duplicate() for _ in range(4))
-        ksp = self.snes.getKSP()
         try:
             self.problem.residual(self.snes, x, r)
             norm = r.norm()
@@ -312,10 +325,7 @@ class Minimiser:
                 if norm <= target and self.stopping == "norm":
                     reason = R.CONVERGED_FNORM_ABS if norm <= atol else R.CONVERGED_FNORM_RELATIVE
                     return reason, norm
-                self.problem.jacobian(self.snes, x, self.A, self.A)
-                ksp.setOperators(self.A, self.A)
-                ksp.solve(r, step)
-                decrement = 0.5 * abs(r.dot(step))
+                decrement = self.newton_step(x, r, step)
                 self._decrements.append(decrement)
                 if self.stopping == "decrement" and decrement <= self.decrement_tol:
                     return DECREMENT_REASON, norm
