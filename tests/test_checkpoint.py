@@ -35,6 +35,12 @@ def frames(xdmf):
         return [reader.read_data(k)[:2] for k in range(reader.num_steps)]
 
 
+def fem_anim(args: list[str], cwd) -> subprocess.CompletedProcess:
+    """``python -m fem_anim ARGS`` in a fresh process, outside the test's MPI job."""
+    return subprocess.run(fem_anim_command() + args, env=clean_environment(), cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
 def kill_midway(command: list[str], out, cwd) -> None:
     """Start ``command -o out`` and SIGKILL it (and its children) after ~45 stats rows."""
     proc = subprocess.Popen(command + ["-o", str(out)], env=clean_environment(), cwd=cwd,
@@ -52,10 +58,8 @@ def kill_midway(command: list[str], out, cwd) -> None:
 
 
 def test_kill_and_resume_equals_an_uninterrupted_run(tmp_path):
-    env = clean_environment()
     whole = tmp_path / "whole"
-    r = subprocess.run(fem_anim_command() + ARGS + ["-o", str(whole)], env=env, cwd=tmp_path,
-                       capture_output=True, text=True, timeout=600)
+    r = fem_anim(ARGS + ["-o", str(whole)], tmp_path)
     assert r.returncode == 0, r.stderr
 
     killed = tmp_path / "killed"
@@ -65,8 +69,7 @@ def test_kill_and_resume_equals_an_uninterrupted_run(tmp_path):
     staged = frames(killed / ".partial" / "trajectory.xdmf")
     assert 40 <= len(staged) < 151
 
-    r = subprocess.run(fem_anim_command() + ARGS + ["--resume", str(killed)], env=env,
-                       cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    r = fem_anim(ARGS + ["--resume", str(killed)], tmp_path)
     assert r.returncode == 0, r.stderr
     a, b = stats(whole / "stats.csv"), stats(killed / "stats.csv")
     assert len(a) == len(b) >= 150  # adaptive substeps included
@@ -89,9 +92,7 @@ def test_kill_and_resume_equals_an_uninterrupted_run(tmp_path):
 
 
 def test_resume_without_an_unfinished_run_is_a_clear_error(tmp_path):
-    r = subprocess.run(fem_anim_command() + ARGS + ["--resume", str(tmp_path / "nothing")],
-                       env=clean_environment(), cwd=tmp_path, capture_output=True, text=True,
-                       timeout=600)
+    r = fem_anim(ARGS + ["--resume", str(tmp_path / "nothing")], tmp_path)
     assert r.returncode == 2 and "nothing to resume" in r.stderr and "Traceback" not in r.stderr
 
 
@@ -107,15 +108,12 @@ def test_kill_under_mpi_and_resume_on_another_process_count(tmp_path):
     # neo-Hookean: no substeps here (StVK substeps, and round-off decides which steps
     # fail, so serial and parallel take different adaptive paths)
     args = ARGS[:-1] + ["material.model=neohookean"]
-    env = clean_environment()
     whole = tmp_path / "whole"
-    r = subprocess.run(fem_anim_command() + args + ["-o", str(whole)], env=env, cwd=tmp_path,
-                       capture_output=True, text=True, timeout=600)
+    r = fem_anim(args + ["-o", str(whole)], tmp_path)
     assert r.returncode == 0, r.stderr
     killed = tmp_path / "killed"
     kill_midway(mpirun + fem_anim_command() + args, killed, tmp_path)
-    r = subprocess.run(fem_anim_command() + args + ["--resume", str(killed)], env=env,
-                       cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    r = fem_anim(args + ["--resume", str(killed)], tmp_path)
     assert r.returncode == 0, r.stderr
     a, b = stats(whole / "stats.csv"), stats(killed / "stats.csv")
     assert len(a) == len(b) == 150
