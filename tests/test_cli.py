@@ -15,7 +15,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 import pytest
-from conftest import ROOT, clean_environment, fem_anim_command, mpirun_command
+from conftest import ROOT, clean_environment, fem_anim_command
 
 from fem_anim.cli import main
 from fem_anim.scene import default_scene_text, load_scene
@@ -188,29 +188,6 @@ def test_malformed_scene_file(tmp_path):
     r = run_cli(["run", str(scene), "-o", str(tmp_path / "out")], tmp_path)
     assert r.returncode == 2
     assert "broken.toml is not valid TOML" in r.stderr and "Traceback" not in r.stderr
-
-
-@pytest.mark.mpi
-def test_mpi_run_matches_serial(tmp_path):
-    mpirun = mpirun_command(2)
-    if mpirun is None:
-        pytest.skip("mpirun not available")
-    args = ["run", "-q", "--set", "time.steps=12"]
-    serial = run_cli(args + ["-o", str(tmp_path / "serial")], tmp_path)
-    assert serial.returncode == 0, serial.stderr
-    parallel = run_cli(args + ["-o", str(tmp_path / "mpi")], tmp_path, mpi=mpirun)
-    assert parallel.returncode == 0, parallel.stderr
-    a, b = read_stats(tmp_path / "serial/stats.csv"), read_stats(tmp_path / "mpi/stats.csv")
-    assert len(a) == len(b) == 12
-    for ra, rb in zip(a, b):
-        for key in ("kinetic", "elastic", "gravity"):
-            assert rb[key] == pytest.approx(ra[key], rel=1e-8), (ra["step"], key)
-        # the total is a small difference of these: 1e-8 relative to the energy scale
-        scale = abs(ra["kinetic"]) + abs(ra["elastic"]) + abs(ra["gravity"])
-        assert abs(rb["total_energy"] - ra["total_energy"]) <= 1e-8 * scale, ra["step"]
-    ua = meshio.read(tmp_path / "serial/final.vtu").point_data["displacement"]
-    ub = meshio.read(tmp_path / "mpi/final.vtu").point_data["displacement"]
-    assert np.linalg.norm(ub - ua) <= 1e-8 * np.linalg.norm(ua)
 
 
 def test_log_view_reaches_petsc(tmp_path):
