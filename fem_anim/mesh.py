@@ -388,7 +388,8 @@ def read_mesh_file(path: Path, dim: int, element_size: float
     in a plane ``z = const``) or tetrahedra (``dim = 3``); other cells are ignored (e.g. a
     gmsh file's boundary triangles), and points no cell uses are dropped. Markers come from
     the first of :data:`MARKER_KEYS` present (gmsh physical groups, medit references), else
-    all 1; names come from the file's field data (gmsh ``$PhysicalNames``). For ``dim = 3`` a file of triangles only, such as an STL, OBJ or PLY surface, is
+    all 1; names come from the file's field data (gmsh ``$PhysicalNames``). For ``dim = 3``
+    a file of triangles only, such as an STL, OBJ or PLY surface, is
     taken as a closed surface and filled with tetrahedra of edge ``element_size``
     (:func:`check_surface`, :func:`fem_anim.meshes.build_volume_from_surface`).
 

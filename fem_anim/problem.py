@@ -11,8 +11,8 @@ callbacks a PETSc SNES needs (:meth:`objective`, :meth:`residual`, :meth:`jacobi
 Only terms the scene declares are built: without ``[gravity]`` there is no gravity
 form; with ``[[region]]`` entries (:mod:`fem_anim.region`) the elastic energy is one
 integral per material model in use over its cells, and mu, lambda and rho are
-piecewise-constant fields instead of constants. The energies reported per step (kinetic, elastic, gravity) are separate scalar
-forms over the same measures.
+piecewise-constant fields instead of constants. The energies reported per step (kinetic,
+elastic, gravity) are separate scalar forms over the same measures.
 
 The unknown is the displacement u = x - X (x deformed, X rest positions); pinned dofs
 are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins).
