@@ -18,7 +18,7 @@ from __future__ import annotations
 import contextlib
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +55,8 @@ class SimplexMesh:
         cells: Input cells (rank 0; empty elsewhere).
         cell_markers: Input per-cell region markers (rank 0; empty elsewhere).
         input_index: For each local geometry node, its row in ``points``.
+        marker_names: Names of the cell markers (gmsh physical group name -> tag), on
+            every rank; empty when the mesh has no named groups.
     """
 
     mesh: object
@@ -62,6 +64,7 @@ class SimplexMesh:
     cells: np.ndarray
     cell_markers: np.ndarray
     input_index: np.ndarray
+    marker_names: dict[str, int] = field(default_factory=dict)
 
     @property
     def dim(self) -> int:
@@ -253,11 +256,13 @@ def check_surface(points: np.ndarray, triangles: np.ndarray, source: str) -> Non
 
 
 def mesh_from_arrays(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray,
-                     cell_markers: np.ndarray | None, source: str) -> SimplexMesh:
+                     cell_markers: np.ndarray | None, source: str,
+                     marker_names: dict[str, int] | None = None) -> SimplexMesh:
     """Check and distribute a mesh given on rank 0 (collective).
 
     Other ranks pass empty arrays of the right width. The check runs on rank 0 and its
     verdict is broadcast, so a bad mesh raises the same :class:`MeshError` on all ranks.
+    ``marker_names`` (rank 0's is used) names the values of ``cell_markers``.
     """
     error = None
     if comm.rank == 0:
@@ -277,7 +282,8 @@ def mesh_from_arrays(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray,
         cell_markers = np.ones(cells.shape[0], dtype=np.int32)
     mesh = compat.create_mesh(comm, cells.astype(np.int64), points, d, CELL_NAMES[d])
     input_index = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)
-    return SimplexMesh(mesh, points, cells, cell_markers.astype(np.int32), input_index)
+    names = comm.bcast(dict(marker_names or {}), root=0)
+    return SimplexMesh(mesh, points, cells, cell_markers.astype(np.int32), input_index, names)
 
 
 @contextlib.contextmanager
@@ -307,14 +313,16 @@ def _gmsh_session(source: str, hint: str):
         gmsh.finalize()
 
 
-def _gmsh_arrays(model, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vertices, simplices and physical-group markers of a meshed gmsh model."""
+def _gmsh_arrays(model, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """Vertices, simplices, physical-group markers and group names of a meshed gmsh model."""
     tags, coords, _ = model.mesh.getNodes()
     points = coords.reshape(-1, 3)[:, :dim]
     index = np.empty(int(tags.max()) + 1 if tags.size else 0, dtype=np.int64)
     index[tags] = np.arange(tags.size)  # gmsh node tag -> row of points
     etype = {2: 2, 3: 4}[dim]  # gmsh: 3-node triangle, 4-node tetrahedron
     cells_list, markers_list = [], []
+    names = {model.getPhysicalName(dim, group): group
+             for _, group in model.getPhysicalGroups(dim) if model.getPhysicalName(dim, group)}
     for _, group in model.getPhysicalGroups(dim):
         for entity in model.getEntitiesForPhysicalGroup(dim, group):
             types, _, nodes = model.mesh.getElements(dim, entity)
@@ -323,9 +331,9 @@ def _gmsh_arrays(model, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
                     cells_list.append(index[np.asarray(n, dtype=np.int64)].reshape(-1, dim + 1))
                     markers_list.append(np.full(cells_list[-1].shape[0], group, np.int32))
     if not cells_list:
-        return points, np.empty((0, dim + 1), np.int64), np.empty(0, np.int32)
+        return points, np.empty((0, dim + 1), np.int64), np.empty(0, np.int32), names
     points, cells = _compact(points, np.concatenate(cells_list))
-    return points, cells, np.concatenate(markers_list)
+    return points, cells, np.concatenate(markers_list), names
 
 
 def _compact(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -338,7 +346,7 @@ def _compact(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndar
     return points[used], remap[cells]
 
 
-def _build_gmsh(cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _build_gmsh(cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Mesh ``cfg["shape"]`` with its builder, given the whole ``[mesh]`` table."""
     from fem_anim.meshes import BUILDERS
 
@@ -353,7 +361,7 @@ def _build_gmsh(cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _fill_surface(points: np.ndarray, triangles: np.ndarray, element_size: float,
-                  source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Tetrahedralise the solid a closed surface bounds (checked first)."""
     from fem_anim.meshes import build_volume_from_surface
 
@@ -366,21 +374,22 @@ def _fill_surface(points: np.ndarray, triangles: np.ndarray, element_size: float
     check_surface(points, triangles, source)
     with _gmsh_session(source, "the surface must not intersect itself") as model:
         model = build_volume_from_surface(model, points, triangles, element_size)
-        points, cells, markers = _gmsh_arrays(model, 3)
+        points, cells, markers, names = _gmsh_arrays(model, 3)
     if cells.shape[0] == 0:
         raise MeshError(f"{source}: gmsh made no tetrahedra inside the surface")
-    return points, cells, markers
+    return points, cells, markers, names
 
 
 def read_mesh_file(path: Path, dim: int, element_size: float
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Points, simplices and region markers of a mesh file (rank 0; not collective).
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
+    """Points, simplices, region markers and their names of a mesh file (rank 0).
 
     Any format meshio reads. The cells are the file's triangles (``dim = 2``, which must lie
     in a plane ``z = const``) or tetrahedra (``dim = 3``); other cells are ignored (e.g. a
     gmsh file's boundary triangles), and points no cell uses are dropped. Markers come from
     the first of :data:`MARKER_KEYS` present (gmsh physical groups, medit references), else
-    all 1. For ``dim = 3`` a file of triangles only, such as an STL, OBJ or PLY surface, is
+    all 1; names come from the file's field data (gmsh ``$PhysicalNames``). For ``dim = 3``
+    a file of triangles only, such as an STL, OBJ or PLY surface, is
     taken as a closed surface and filled with tetrahedra of edge ``element_size``
     (:func:`check_surface`, :func:`fem_anim.meshes.build_volume_from_surface`).
 
@@ -431,7 +440,9 @@ def read_mesh_file(path: Path, dim: int, element_size: float
             raise MeshError(f"{source}: its triangles do not lie in a plane z = const, as "
                             "mesh.dim = 2 needs (for a closed surface use mesh.dim = 3)")
     points, cells = _compact(points[:, :dim], cells)
-    return points, cells, markers
+    names = {name: int(value[0]) for name, value in m.field_data.items()
+             if len(value) >= 2 and int(value[1]) == dim}
+    return points, cells, markers, names
 
 
 def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
@@ -445,6 +456,7 @@ def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
     points = np.empty((0, d))
     cells = np.empty((0, d + 1), np.int64)
     markers = np.empty(0, np.int32)
+    names: dict[str, int] = {}
     source = f"mesh ({cfg['shape']})"
     error = None
     if comm.rank == 0:
@@ -453,12 +465,12 @@ def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
                 path = Path(cfg["file"])
                 path = path if path.is_absolute() else scene.base_dir / path
                 source = f"mesh file {path}"
-                points, cells, markers = read_mesh_file(path, d, cfg["element_size"])
+                points, cells, markers, names = read_mesh_file(path, d, cfg["element_size"])
             else:
-                points, cells, markers = _build_gmsh(cfg)
+                points, cells, markers, names = _build_gmsh(cfg)
         except MeshError as err:
             error = str(err)
     error = comm.bcast(error, root=0)
     if error:
         raise MeshError(error)
-    return mesh_from_arrays(comm, points, cells, markers, source)
+    return mesh_from_arrays(comm, points, cells, markers, source, names)

@@ -9,8 +9,10 @@
 that single form (STYLE rule 2), compiles everything once, and offers the assembly
 callbacks a PETSc SNES needs (:meth:`objective`, :meth:`residual`, :meth:`jacobian`).
 Only terms the scene declares are built: without ``[gravity]`` there is no gravity
-form. The energies reported per step (kinetic, elastic, gravity) are separate scalar
-forms over the same measures.
+form; with ``[[region]]`` entries (:mod:`fem_anim.region`) the elastic energy is one
+integral per material model in use over its cells, and mu, lambda and rho are
+piecewise-constant fields instead of constants. The energies reported per step (kinetic,
+elastic, gravity) are separate scalar forms over the same measures.
 
 The unknown is the displacement u = x - X (x deformed, X rest positions); pinned dofs
 are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins).
@@ -25,6 +27,7 @@ import basix
 import numpy as np
 import ufl
 from dolfinx import fem, la
+from dolfinx import mesh as dmesh
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -41,6 +44,7 @@ from . import compat
 from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh
+from .region import assign_materials
 
 __all__ = ["EnergyProblem", "PinMotion", "QuadratureData", "compile_forms",
            "default_quadrature_degree"]
@@ -156,6 +160,7 @@ class EnergyProblem:
             self.quadrature_degree = default_quadrature_degree(degree)
         self.scheme = SCHEMES[scene["time"]["integrator"]]
         self.material = get_material(scene["material"]["model"])
+        self.material_map = None
 
         V = self.V = compat.vector_space(mesh, degree)
         self.u = fem.Function(V, name="displacement")
@@ -175,6 +180,10 @@ class EnergyProblem:
 
         dx = ufl.Measure("dx", domain=mesh)
         self.dx_elastic = dx(metadata={"quadrature_degree": self.quadrature_degree})
+        #: (material, measure) of each elastic integral: one per model in use
+        self.elastic_terms = [(self.material, self.dx_elastic)]
+        if scene.get("region"):
+            self._regions()
         self.dx_mass = inertia_forms.mass_measure(dx, degree, mat["mass"] == "lumped")
         # Gravity shares the inertia measure: exact either way (linear integrand; for lumped
         # P1 the vertex rule gives exactly sum_i m_i g.u_i). Integrating it at a lower degree
@@ -219,11 +228,14 @@ class EnergyProblem:
                 self._projected_elastic_hessian(du, dv)
         self.filter_inversion = solver["inversion_filter"]
         if self.filter_inversion is None:
-            self.filter_inversion = self.material.requires_positive_J
+            self.filter_inversion = any(m.requires_positive_J for m, _ in self.elastic_terms)
         self.det_data = None
+        self.det_dofs = None  # quadrature dofs the filter watches (None: all)
         if self.filter_inversion:
             self.det_data = self._quadrature_data(
                 "det_F", ufl.det(deformation_gradient(self.u)), lambda J: J, (), ())
+            if solver["inversion_filter"] is None and self.material_map is not None:
+                self.det_dofs = self._positive_J_dofs()
         ufl_forms |= {
             "objective": objective,
             "residual": residual,
@@ -252,6 +264,44 @@ class EnergyProblem:
         self.x_work = compat.petsc_vec(self.u).duplicate()
 
     # -- construction helpers -------------------------------------------------------------
+    def _regions(self) -> None:
+        """Per-region materials (:mod:`fem_anim.region`): DG0 fields replace the constants
+        :attr:`mu`, :attr:`lmbda`, :attr:`rho`, and :attr:`elastic_terms` gets one measure
+        per material model in use (cell tags = model index).
+        """
+        mesh = self.domain.mesh
+        self.material_map = cells = assign_materials(self.scene, self.domain)
+        Q = fem.FunctionSpace(mesh, ("DG", 0))
+        cell_dofs = Q.dofmap.list.array.reshape(-1)[: cells.cell_material.size]
+        E, nu = cells.cell_values("youngs_modulus"), cells.cell_values("poisson_ratio")
+        fields = dict(zip(("mu", "lmbda"), lame_parameters(E, nu)))
+        fields["rho"] = cells.cell_values("density")
+        for name, values in fields.items():
+            function = fem.Function(Q, name=name)
+            function.x.array[cell_dofs] = values
+            setattr(self, name, function)
+        if len(cells.models) == 1:
+            self.material = get_material(cells.models[0])
+            self.elastic_terms = [(self.material, self.dx_elastic)]
+            return
+        n = cells.cell_model.size
+        tags = dmesh.meshtags(mesh, self.d, np.arange(n, dtype=np.int32), cells.cell_model)
+        dx_tagged = ufl.Measure("dx", domain=mesh, subdomain_data=tags,
+                                metadata={"quadrature_degree": self.quadrature_degree})
+        self.elastic_terms = [(get_material(model), dx_tagged(k))
+                              for k, model in enumerate(cells.models)]
+
+    def _positive_J_dofs(self) -> np.ndarray | None:
+        """Quadrature dofs of the cells whose model needs det F > 0 (None: every cell)."""
+        needs = np.array([get_material(m).requires_positive_J
+                          for m in self.material_map.models])
+        if needs.all():
+            return None
+        cells = needs[self.material_map.cell_model]
+        dofs = self.det_data.function.function_space.dofmap.list.array.reshape(
+            self.det_data.num_cells, -1)
+        return dofs[cells].ravel()
+
     def _quadrature_points(self) -> np.ndarray:
         """Reference points of the elastic quadrature rule (the rule FFCx uses)."""
         cell = self.domain.mesh.topology.cell_name()
@@ -269,21 +319,25 @@ class EnergyProblem:
                                              jit_params=JIT_OPTIONS),
                               evaluate, index_map.size_local + index_map.num_ghosts, in_shape)
 
-    def _psi(self, u, F=None):
-        """The material's psi of F(u) (or of a given F), with its quadrature data."""
+    def _psi(self, u, F=None, material=None):
+        """A material's psi of F(u) (or of a given F), with its quadrature data."""
         F = deformation_gradient(u) if F is None else F
+        material = self.material if material is None else material
         if u not in self._extra:
             self._extra[u] = {}
-            for key in self.material.needs(self.d):
+            needs = dict.fromkeys(k for m, _ in self.elastic_terms for k in m.needs(self.d))
+            for key in needs:
                 data = EXTRA_DATA[key]
                 q = self._quadrature_data(key, deformation_gradient(u), data.evaluate,
                                           (self.d, self.d), data.value_shape(self.d))
                 self.quadrature_data.append(q)
                 self._extra[u][data.keyword] = q.function
-        return self.material.psi(F, self.mu, self.lmbda, **self._extra[u])
+        extra = {data.keyword: self._extra[u][data.keyword]
+                 for data in map(EXTRA_DATA.get, material.needs(self.d))}
+        return material.psi(F, self.mu, self.lmbda, **extra)
 
     def _elastic_energy(self, u):
-        return self._psi(u) * self.dx_elastic
+        return sum(self._psi(u, material=m) * dx for m, dx in self.elastic_terms)
 
     def _projected_elastic_hessian(self, du, dv):
         """w int grad(v) : A+ : grad(du), A+ the PSD projection of d^2 psi/dF^2."""
@@ -354,6 +408,8 @@ class EnergyProblem:
         """Smallest det F over the quadrature points of all ranks, for the current u."""
         self.det_data.update()
         local = self.det_data.function.x.array
+        if self.det_dofs is not None:
+            local = local[self.det_dofs]
         return self.comm.allreduce(local.min() if local.size else np.inf, op=MPI.MIN)
 
     def objective(self, snes, x: PETSc.Vec) -> float:

@@ -7,7 +7,9 @@ dotted key path, the constraint and the value.
 
 Sections describing the body and the run (``mesh``, ``element``, ``material``,
 ``time``, ``solver``, ``output``) fall back key by key to :data:`DEFAULTS`; physical
-terms (``gravity``, ``pin``) exist only when the scene declares them.
+terms (``gravity``, ``pin``) exist only when the scene declares them. ``[[region]]`` entries
+override the body's ``[material]`` on parts of the mesh (:mod:`fem_anim.region`);
+``[initial]`` gives the body a rigid initial velocity (:mod:`fem_anim.initial`).
 """
 
 from __future__ import annotations
@@ -203,6 +205,20 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "center": Key(list, None, None, (2, 3)),
         "until": Key(NUM, None, _non_negative),
     },
+    "region": {
+        "name": Key(str, None),
+        "min": Key(list, None, None, (2, 3)),
+        "max": Key(list, None, None, (2, 3)),
+        "model": Key(str, None, _one_of(MATERIAL_MODELS)),
+        "youngs_modulus": Key(NUM, None, _positive),
+        "poisson_ratio": Key(NUM, None, _in_open(-1.0, 0.5)),
+        "density": Key(NUM, None, _positive),
+    },
+    "initial": {
+        "velocity": Key(list, None, None, (2, 3)),
+        "angular_velocity": Key((int, float, list), None),
+        "center": Key(list, None, None, (2, 3)),
+    },
     "solver": {
         "preset": Key(str, "cholesky"),
         "method": Key(str, "newton", _one_of(NONLINEAR_METHODS)),
@@ -220,11 +236,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
 }
 #: Sections that exist only when a scene declares them (physical terms).
-OPTIONAL_SECTIONS = ("gravity", "damping")
-#: Sections that are arrays of tables (``[[pin]]``).
-ARRAY_SECTIONS = ("pin",)
+OPTIONAL_SECTIONS = ("gravity", "damping", "initial")
+#: Sections that are arrays of tables (``[[pin]]``, ``[[region]]``).
+ARRAY_SECTIONS = ("pin", "region")
 #: Keys without a default that a declared optional section must give.
-REQUIRED = {"gravity": ("acceleration",), "pin": ("min", "max")}
+REQUIRED = {"gravity": ("acceleration",), "pin": ("min", "max"), "region": ("name",)}
+#: Keys of a ``[[region]]`` that override the body's ``[material]``.
+REGION_MATERIAL_KEYS = ("model", "youngs_modulus", "poisson_ratio", "density")
 
 DEFAULTS: dict[str, dict[str, Any]] = {
     section: {k: key.default for k, key in keys.items()}
@@ -452,6 +470,8 @@ def _check_consistency(data: dict[str, Any]) -> None:
                 raise SceneError(f"pin[{i}].axis must not be the zero vector")
         if pin["angular_velocity"] != 0 and d == 3 and pin["axis"] is None:
             raise SceneError(f"pin[{i}].axis is required with pin[{i}].angular_velocity")
+    _check_regions(data)
+    _check_initial(data)
     if data["time"]["min_dt"] is not None and data["time"]["min_dt"] > data["time"]["dt"]:
         raise SceneError(f"time.min_dt must not exceed time.dt = {data['time']['dt']}, got "
                          f"{data['time']['min_dt']}")
@@ -463,6 +483,57 @@ def _check_consistency(data: dict[str, Any]) -> None:
             "newton", "trust_region"):
         raise SceneError(f"solver.hessian = \"{data['solver']['hessian']}\" modifies Newton's "
                          f"Hessian; solver.method = \"{data['solver']['method']}\" uses none")
+
+
+def _check_regions(data: dict[str, Any]) -> None:
+    """``[[region]]``: a box (``min`` and ``max``) or a mesh group name; names unique;
+    at least one material key; settings the regions' models allow."""
+    d = data["mesh"]["dim"]
+    seen: dict[str, int] = {}
+    for i, region in enumerate(data["region"]):
+        where = f"region[{i}] ({region['name']})"
+        if region["name"] in seen:
+            raise SceneError(f"{where}: the name is already used by region[{seen[region['name']]}]")
+        seen[region["name"]] = i
+        lo, hi = region["min"], region["max"]
+        if (lo is None) != (hi is None):
+            raise SceneError(f"{where}: give both min and max (a box of cells by centroid), or "
+                             "neither (the name is then a physical group of the mesh)")
+        if lo is not None:
+            if len(lo) != d or len(hi) != d:
+                raise SceneError(f"region[{i}].min and region[{i}].max must have {d} entries "
+                                 f"for mesh.dim = {d}, got {lo} and {hi}")
+            if any(a > b for a, b in zip(lo, hi)):
+                raise SceneError(f"{where} is an empty box: min {lo} exceeds max {hi}")
+        if all(region[k] is None for k in REGION_MATERIAL_KEYS):
+            raise SceneError(f"{where} sets no material key (give at least one of "
+                             f"{', '.join(REGION_MATERIAL_KEYS)})")
+    models = {data["material"]["model"]} | {r["model"] for r in data["region"] if r["model"]}
+    if len(models) > 1 and data["solver"]["hessian"] == "project":
+        raise SceneError("solver.hessian = \"project\" takes one material model per body; the "
+                         f"regions use {', '.join(sorted(models))} (use \"shift\")")
+
+
+def _check_initial(data: dict[str, Any]) -> None:
+    """``[initial]``: vectors of the mesh dimension; omega a number in 2D, 3 numbers in 3D."""
+    if "initial" not in data:
+        return
+    d, initial = data["mesh"]["dim"], data["initial"]
+    for key in ("velocity", "center"):
+        if initial[key] is not None and len(initial[key]) != d:
+            raise SceneError(f"initial.{key} must have {d} entries for mesh.dim = {d}, "
+                             f"got {initial[key]}")
+    omega = initial["angular_velocity"]
+    if d == 2 and isinstance(omega, list):
+        raise SceneError("initial.angular_velocity must be a number (rad/s about z) for "
+                         f"mesh.dim = 2, got {_show(omega)}")
+    if d == 3 and omega is not None and not (
+            isinstance(omega, list) and len(omega) == 3
+            and all(isinstance(c, NUM) and not isinstance(c, bool) for c in omega)):
+        raise SceneError("initial.angular_velocity must be a list of 3 numbers (the angular "
+                         f"velocity vector, rad/s) for mesh.dim = 3, got {_show(omega)}")
+    if all(initial[k] is None for k in ("velocity", "angular_velocity")):
+        raise SceneError("[initial] needs velocity or angular_velocity")
 
 
 def _parse_toml(text: str) -> dict[str, Any]:

@@ -23,6 +23,7 @@ from dolfinx.fem import petsc as fem_petsc
 from . import compat
 from .checkpoint import load_checkpoint, save_checkpoint
 from .errors import ConvergenceError, FemAnimError
+from .initial import initial_velocity
 from .integrator import Integrator, State
 from .mesh import SimplexMesh, build_mesh
 from .output import RunDirectory, StatsWriter, TrajectoryWriter, VertexGather, write_final
@@ -101,10 +102,16 @@ class Simulation:
 
     # -- state ----------------------------------------------------------------------------
     def initial_state(self) -> State:
-        """Rest state; for Newmark a_0 = M^-1 f(x_0), zero on pinned dofs (seed eq. 1b)."""
+        """Rest shape, at rest or with the rigid velocity of ``[initial]``
+        (:mod:`fem_anim.initial`); for Newmark a_0 = M^-1 (f(x_0) - C v_0), zero on pinned
+        dofs (seed eq. 1b)."""
         p = self.problem
         n = p.u.x.array.size
         state = State(u=np.zeros(n), v=np.zeros(n), a=np.zeros(n))
+        v0 = initial_velocity(self.scene, p)
+        if v0 is not None:
+            state.v = v0
+            p.v.x.array[:] = v0
         if self.integrator.name == "newmark":
             state.a = self.acceleration(state.u, state.v)
         return state

@@ -7,7 +7,8 @@ discrete energy is ``E(x) = sum_e w_e psi(F_e)`` (eq. (27b)), so by the chain ru
     hess E = sum_e  w_e G_e^T (dP/dF)(F_e) G_e,
 
 scattered to the global dofs of each element. ``mu`` and ``lmbda`` are scalars or per-cell
-arrays of shape ``(n_cells,)``.
+arrays of shape ``(n_cells,)``; ``material`` is a model name or a per-cell array of names
+(a body of several materials: each model is evaluated on its own cells).
 """
 
 from __future__ import annotations
@@ -35,13 +36,33 @@ def _element_kinematics(points, cells, x):
     return dofs, cell_volumes(points, cells), G, F
 
 
+def _per_cell(function, material, F: np.ndarray, mu, lmbda) -> np.ndarray:
+    """``function(material, F, mu, lmbda)`` with a model name per cell, one call per model."""
+    if isinstance(material, str):
+        return function(material, F, mu, lmbda)
+    names = np.asarray(material)
+    if names.shape != (F.shape[0],):
+        raise ValueError(f"material must be a name or {F.shape[0]} names, got {names.shape}")
+    n = F.shape[0]
+    mu, lmbda = np.broadcast_to(mu, (n,)), np.broadcast_to(lmbda, (n,))
+    out = None
+    for name in np.unique(names):
+        cells = names == name
+        values = function(str(name), F[cells], mu[cells], lmbda[cells])
+        if out is None:
+            out = np.empty((n,) + values.shape[1:])
+        out[cells] = values
+    return out
+
+
 def elastic_energy(points, cells, material: str, mu, lmbda, x: np.ndarray) -> float:
     """Total elastic energy ``E(x) = sum_e w_e psi(F_e)`` (seed eq. (27b)).
 
     Args:
         points: Reference vertex positions, ``(n_vertices, d)``.
         cells: Simplices, ``(n_cells, d+1)``.
-        material: Name of a material model (see :data:`~fem_anim.reference.materials.MATERIALS`).
+        material: Name of a material model (see :data:`~fem_anim.reference.materials.MATERIALS`),
+            or one name per cell, ``(n_cells,)``.
         mu: First Lame parameter, scalar or ``(n_cells,)``.
         lmbda: Second Lame parameter, scalar or ``(n_cells,)``.
         x: Deformed positions, vertex-major interleaved, ``(n_vertices * d,)``.
@@ -50,7 +71,7 @@ def elastic_energy(points, cells, material: str, mu, lmbda, x: np.ndarray) -> fl
         The energy; ``+inf`` if a neo-Hookean element is inverted.
     """
     _, w, _, F = _element_kinematics(points, cells, x)
-    return float(np.sum(w * psi(material, F, mu, lmbda)))
+    return float(np.sum(w * _per_cell(psi, material, F, mu, lmbda)))
 
 
 def elastic_gradient(points, cells, material: str, mu, lmbda, x: np.ndarray) -> np.ndarray:
@@ -59,7 +80,7 @@ def elastic_gradient(points, cells, material: str, mu, lmbda, x: np.ndarray) -> 
     Arguments as in :func:`elastic_energy`.
     """
     dofs, w, G, F = _element_kinematics(points, cells, x)
-    local = np.einsum("n,nij,ni->nj", w, G, vec(first_piola(material, F, mu, lmbda)))
+    local = np.einsum("n,nij,ni->nj", w, G, vec(_per_cell(first_piola, material, F, mu, lmbda)))
     return np.bincount(dofs.ravel(), weights=local.ravel(), minlength=np.size(x))
 
 
@@ -72,7 +93,7 @@ def elastic_hessian(points, cells, material: str, mu, lmbda, x: np.ndarray) -> s
         Symmetric ``(n_vertices * d, n_vertices * d)`` CSR matrix (duplicates summed).
     """
     dofs, w, G, F = _element_kinematics(points, cells, x)
-    A = first_piola_derivative(material, F, mu, lmbda)
+    A = _per_cell(first_piola_derivative, material, F, mu, lmbda)
     local = np.einsum("n,npi,npq,nqj->nij", w, G, A, G, optimize=True)
     m = dofs.shape[1]
     rows = np.repeat(dofs, m, axis=1).ravel()

@@ -40,8 +40,8 @@ __all__ = [
 Array = np.ndarray
 
 
-def lame_parameters(E: float, nu: float) -> tuple[float, float]:
-    """Lame parameters from Young's modulus and Poisson's ratio.
+def lame_parameters(E, nu) -> tuple:
+    """Lame parameters from Young's modulus and Poisson's ratio (scalars or per-cell arrays).
 
     ``mu = E / (2 (1 + nu))``, ``lmbda = E nu / ((1 + nu)(1 - 2 nu))``; plane strain (``d`` = 2)
     uses the same values with a 2x2 ``F``.
@@ -49,9 +49,9 @@ def lame_parameters(E: float, nu: float) -> tuple[float, float]:
     Raises:
         ValueError: If ``E <= 0`` or ``nu`` is outside ``(-1, 0.5)``.
     """
-    if not E > 0.0:
+    if not np.all(np.asarray(E) > 0.0):
         raise ValueError(f"E must be positive, got {E}")
-    if not -1.0 < nu < 0.5:
+    if not np.all((-1.0 < np.asarray(nu)) & (np.asarray(nu) < 0.5)):
         raise ValueError(f"nu must be in (-1, 0.5), got {nu}")
     return E / (2.0 * (1.0 + nu)), E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
 

@@ -27,7 +27,7 @@ class EnergyProblem:
     Attributes:
         points: Reference vertex positions, ``(n_vertices, d)``.
         cells: Simplices, ``(n_cells, d+1)``.
-        material: Material model name.
+        material: Material model name, or one per cell ``(n_cells,)``.
         mu: First Lame parameter, scalar or ``(n_cells,)``.
         lmbda: Second Lame parameter, scalar or ``(n_cells,)``.
         mass: Mass matrix ``M`` (consistent or lumped), CSR.
@@ -37,7 +37,7 @@ class EnergyProblem:
 
     points: np.ndarray
     cells: np.ndarray
-    material: str
+    material: str | np.ndarray
     mu: float | np.ndarray
     lmbda: float | np.ndarray
     mass: sp.csr_matrix
@@ -84,9 +84,9 @@ class EnergyProblem:
 def build_problem(
     points: np.ndarray,
     cells: np.ndarray,
-    material: str,
-    E: float,
-    nu: float,
+    material,
+    E,
+    nu,
     rho,
     gravity=None,
     pinned: np.ndarray | None = None,
@@ -97,9 +97,9 @@ def build_problem(
     Args:
         points: Reference vertex positions, ``(n_vertices, d)``.
         cells: Simplices, ``(n_cells, d+1)``.
-        material: One of :data:`~fem_anim.reference.materials.MATERIALS`.
-        E: Young's modulus.
-        nu: Poisson's ratio.
+        material: One of :data:`~fem_anim.reference.materials.MATERIALS`, or one per cell.
+        E: Young's modulus, scalar or ``(n_cells,)``.
+        nu: Poisson's ratio, scalar or ``(n_cells,)``.
         rho: Density, scalar or ``(n_cells,)``.
         gravity: Gravitational acceleration ``(d,)``; default zero.
         pinned: Boolean mask over dofs; default none pinned.
@@ -110,7 +110,7 @@ def build_problem(
     """
     points, cells = check_mesh(points, cells)
     n_dofs, d = points.size, points.shape[1]
-    if material not in MATERIALS:
+    if not set(np.atleast_1d(material)) <= set(MATERIALS):
         raise ValueError(f"material must be one of {MATERIALS}, got {material!r}")
     mu, lmbda = lame_parameters(E, nu)
     g = np.zeros(d) if gravity is None else np.asarray(gravity, dtype=float)
