@@ -99,20 +99,41 @@ class PinMotion:
                    axis / np.linalg.norm(axis), np.asarray(center, float),
                    np.inf if pin["until"] is None else float(pin["until"]))
 
-    def displacement(self, t: float) -> np.ndarray:
-        """Displacement of the pinned dofs at time ``t`` (Rodrigues' rotation formula)."""
-        t = min(t, self.until)
-        theta = self.omega * t
+    def _rotated(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(r, R(omega t') r) with r = X - c (Rodrigues' rotation formula)."""
+        theta = self.omega * min(t, self.until)
         r = self.X - self.center
-        d = r.shape[1]
-        if d == 2:
+        if r.shape[1] == 2:
             c, s = np.cos(theta), np.sin(theta)
-            rotated = np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
-        else:
-            k = self.axis
-            rotated = (r * np.cos(theta) + np.cross(k, r) * np.sin(theta)
-                       + np.outer(r @ k, k) * (1.0 - np.cos(theta)))
-        return rotated - r + self.velocity * t
+            return r, np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
+        k = self.axis
+        return r, (r * np.cos(theta) + np.cross(k, r) * np.sin(theta)
+                   + np.outer(r @ k, k) * (1.0 - np.cos(theta)))
+
+    def _spin(self, r: np.ndarray) -> np.ndarray:
+        """omega x r (2D: omega about z)."""
+        if r.shape[1] == 2:
+            return self.omega * np.stack([-r[:, 1], r[:, 0]], axis=1)
+        return self.omega * np.cross(self.axis, r)
+
+    def displacement(self, t: float) -> np.ndarray:
+        """Displacement of the pinned dofs at time ``t``."""
+        r, rotated = self._rotated(t)
+        return rotated - r + self.velocity * min(t, self.until)
+
+    def rates(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity and acceleration of the pinned dofs at time ``t`` (zero once stopped).
+
+        v = omega x R r + velocity, a = omega x (omega x R r): the time derivatives of
+        :meth:`displacement` while the handle moves (from ``until`` on, it rests; a step
+        time within round-off of ``until``, such as 10 x 0.005 = 0.049999..., counts as
+        stopped, since the step that ends there is the one in which the handle stops).
+        """
+        if t >= self.until * (1.0 - 1e-12):
+            return np.zeros_like(self.X), np.zeros_like(self.X)
+        _, rotated = self._rotated(t)
+        spin = self._spin(rotated)
+        return spin + self.velocity, self._spin(spin)
 
 
 @dataclass
@@ -390,6 +411,14 @@ class EnergyProblem:
         values = self.u_bc.x.array.reshape(-1, self.d)
         for motion in self.moving_pins:
             values[motion.dofs] = motion.displacement(t)
+
+    def prescribe_pin_rates(self, t: float, v: np.ndarray, a: np.ndarray) -> None:
+        """Overwrite ``v`` and ``a`` (local dof arrays) at the animated pins with their
+        prescribed values at time ``t``."""
+        for motion in self.moving_pins:
+            rates = motion.rates(t)
+            for array, value in zip((v, a), rates):
+                array.reshape(-1, self.d)[motion.dofs] = value
 
     # -- assembly -------------------------------------------------------------------------
     def set_state(self, x: PETSc.Vec) -> None:

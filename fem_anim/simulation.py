@@ -171,6 +171,12 @@ class Simulation:
         stats = self.minimiser.solve(p.x_work, what=what)
         p.set_state(p.x_work)
         new = integ.update(h, state, p.u.x.array.copy(), u_pred)
+        if integ.name == "newmark":
+            # The trapezoidal update v_{n+1} = 2 (u_{n+1} - u_n)/h - v_n would carry a kink
+            # of the prescribed motion (a handle stopping) on as a +-v oscillation of the
+            # pinned dofs, which never decays and leaks into the free dofs through the
+            # consistent mass; the pins' exact rates replace it.
+            p.prescribe_pin_rates(new.time, new.v, new.a)
         p.v.x.array[:] = new.v
         return new, stats
 
