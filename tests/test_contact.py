@@ -13,7 +13,9 @@ the step bound, and the physics of bodies dropped on a plane and on a sphere.
   block on a plane tilted by 20 degrees stays with mu = 0.6 > tan 20 and slides with
   mu = 0.1 (acceleration g (sin - mu cos));
 * a scene without obstacles has no contact term; a body that starts through an
-  obstacle is one clear error (exit 2).
+  obstacle is one clear error (exit 2);
+* MPI (issue 8): the jelly-cube scene on 2 and 3 ranks gives the serial stats and final
+  displacement to 1e-8.
 """
 
 from __future__ import annotations
@@ -21,12 +23,14 @@ from __future__ import annotations
 import math
 import subprocess
 
+import meshio
 import numpy as np
 import pytest
 import ufl
-from conftest import clean_environment, fem_anim_command
+from conftest import ROOT, clean_environment, fem_anim_command, mpirun_command
 from dolfinx import fem
 from mpi4py import MPI
+from test_cli import read_stats
 from test_reference_comparison import Comparison, toml_list
 
 from fem_anim import reference
@@ -317,3 +321,34 @@ def test_body_starting_through_an_obstacle_is_one_error(tmp_path, obstacle, mess
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("fem-anim: error: ") and message in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+# -- MPI (issue 8) ------------------------------------------------------------------------------
+@pytest.mark.mpi
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches mpirun itself")
+@pytest.mark.parametrize("ranks", [2, pytest.param(3, marks=pytest.mark.slow)])
+def test_contact_scene_under_mpi_matches_serial(tmp_path, ranks):
+    """The jelly cube (coarse, 24 steps: fall and impact) on 1 and on 2 or 3 ranks."""
+    mpirun = mpirun_command(ranks)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    args = ["run", str(ROOT / "demos" / "jelly_cube.toml"), "-q", "--set",
+            "mesh.element_size=0.1", "--set", "time.steps=24", "--set", "output.render=false"]
+    runs = {}
+    for name, prefix in (("serial", []), ("mpi", mpirun)):
+        r = subprocess.run(prefix + fem_anim_command() + args + ["-o", str(tmp_path / name)],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                           env=clean_environment())
+        assert r.returncode == 0, r.stderr
+        runs[name] = read_stats(tmp_path / name / "stats.csv")
+    a, b = runs["serial"], runs["mpi"]
+    assert len(a) == len(b) == 24 and max(r["contact"] for r in a) > 0
+    for ra, rb in zip(a, b):
+        # Newton may take one iteration more or less where the line search meets round-off
+        assert abs(rb["newton_its"] - ra["newton_its"]) <= 2, ra["step"]
+        scale = sum(abs(ra[k]) for k in ("kinetic", "elastic", "gravity", "contact"))
+        for key in ("kinetic", "elastic", "gravity", "contact", "total_energy"):
+            assert abs(rb[key] - ra[key]) <= 1e-8 * scale, (ra["step"], key)
+    ua = meshio.read(tmp_path / "serial/final.vtu").point_data["displacement"]
+    ub = meshio.read(tmp_path / "mpi/final.vtu").point_data["displacement"]
+    assert np.linalg.norm(ub - ua) <= 1e-8 * np.linalg.norm(ua)

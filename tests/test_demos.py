@@ -9,7 +9,7 @@ import pytest
 from conftest import ROOT, clean_environment, mpirun_command
 
 #: Every literate demo script in demos/ must be listed here (test_every_demo_is_registered).
-DEMOS = ["materials.py", "optimisation_basics.py"]
+DEMOS = ["jelly_cube.py", "materials.py", "optimisation_basics.py"]
 
 
 def test_every_demo_is_registered():
