@@ -30,7 +30,7 @@ __all__ = ["VertexGather", "RunDirectory", "StatsWriter", "TrajectoryWriter", "w
 
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "newton_decrement", "shift", "kinetic", "elastic", "gravity",
-                 "total_energy", "assembly_s", "factor_s", "linear_solve_s", "other_s",
+                 "contact", "total_energy", "assembly_s", "factor_s", "linear_solve_s", "other_s",
                  "solve_wall_s", "step_wall_s"]
 
 

@@ -9,10 +9,11 @@
 that single form (STYLE rule 2), compiles everything once, and offers the assembly
 callbacks a PETSc SNES needs (:meth:`objective`, :meth:`residual`, :meth:`jacobian`).
 Only terms the scene declares are built: without ``[gravity]`` there is no gravity
-form; with ``[[region]]`` entries (:mod:`fem_anim.region`) the elastic energy is one
-integral per material model in use over its cells, and mu, lambda and rho are
-piecewise-constant fields instead of constants. The energies reported per step (kinetic,
-elastic, gravity) are separate scalar forms over the same measures.
+form, without ``[[obstacle]]`` no contact form (:mod:`fem_anim.contact`); with ``[[region]]``
+entries (:mod:`fem_anim.region`) the elastic energy is one integral per material model in
+use over its cells, and mu, lambda and rho are piecewise-constant fields instead of
+constants. The energies reported per step (kinetic, elastic, gravity, contact) are separate
+scalar forms over the same measures.
 
 The unknown is the displacement u = x - X (x deformed, X rest positions); pinned dofs
 are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins).
@@ -41,6 +42,7 @@ from fem_anim.forms.lame import lame_parameters
 from fem_anim.forms.material import EXTRA_DATA, get_material
 
 from . import compat
+from .contact import ObstacleContact
 from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh
@@ -222,7 +224,13 @@ class EnergyProblem:
                                                    dtype=PETSc.ScalarType))
             gravity_u = gravity_forms.gravity_potential(self.u, self.rho, self.g, self.dx_load)
 
+        self.contact = None  # obstacles: barrier (and friction) terms, forms/contact.py
+        if scene["obstacle"]:
+            self.contact = ObstacleContact(scene["obstacle"], self.u, self.u_prev, degree,
+                                           mat["youngs_modulus"])
         potential = potential_u = elastic_u if gravity_u is None else elastic_u + gravity_u
+        if self.contact is not None:
+            potential = potential_u = potential_u + self.contact.energy
         if self.scheme.explicit:
             # Symplectic Euler: E linearised at u_prev, grad E(u_prev) . u (forms/integrator.py)
             at_prev = self._elastic_energy(self.u_prev)
@@ -230,6 +238,14 @@ class EnergyProblem:
                 at_prev += gravity_forms.gravity_potential(self.u_prev, self.rho, self.g,
                                                            self.dx_load)
             potential = ufl.derivative(at_prev, self.u_prev, self.u)
+            if self.contact is not None:  # the barrier stays implicit: it guards d > 0
+                potential += self.contact.energy
+        contact_terms = None
+        if self.contact is not None:
+            contact_terms = self.contact.energy if self.contact.friction is None else \
+                self.contact.energy + self.contact.friction
+            if self.contact.friction is not None:
+                potential += self.contact.friction
         convex = inertia_forms.inertia(self.u, self.u_pred, self.rho, self.dx_mass)
         du, dv = ufl.TrialFunction(V), ufl.TestFunction(V)
         ufl_forms = {}
@@ -247,6 +263,12 @@ class EnergyProblem:
             # the convex terms exactly, the elastic one projected (gravity is linear)
             jacobian = ufl.derivative(ufl.derivative(convex, self.u, dv), self.u, du) + \
                 self._projected_elastic_hessian(du, dv)
+            if contact_terms is not None:  # exact: not a function of F
+                jacobian += self.weight * ufl.derivative(ufl.derivative(
+                    contact_terms, self.u, dv), self.u, du)
+        if self.contact is not None and \
+                (correction := self.contact.curvature_correction(du, dv)) is not None:
+            jacobian += self.weight * correction  # sphere barriers: PSD-projected Hessian
         self.filter_inversion = solver["inversion_filter"]
         if self.filter_inversion is None:
             self.filter_inversion = any(m.requires_positive_J for m, _ in self.elastic_terms)
@@ -268,6 +290,8 @@ class EnergyProblem:
         }
         if gravity_u is not None:
             ufl_forms["gravity"] = gravity_u
+        if self.contact is not None:
+            ufl_forms["contact"] = self.contact.energy
         self.ufl_objective = objective
         self.ufl_elastic = elastic_u
         self.assembly_s = 0.0  # wall time spent assembling (objective, residual, Jacobian)
@@ -278,8 +302,8 @@ class EnergyProblem:
         self.mass_form = compiled["mass"]
         self.potential_gradient_form = compiled["potential_gradient"]
         self.damping_force_form = compiled.get("damping_force")
-        self.energy_forms = {k: compiled[k] for k in ("kinetic", "elastic", "gravity")
-                             if k in compiled}
+        self.energy_forms = {k: compiled[k] for k in ("kinetic", "elastic", "gravity",
+                                                            "contact") if k in compiled}
 
         self.bcs = self._pins()
         self.x_work = compat.petsc_vec(self.u).duplicate()
@@ -445,12 +469,15 @@ class EnergyProblem:
         """g(x) for the SNES line search and trust region (STYLE rule 7).
 
         With the inversion filter on, a state where some det F <= 0 has g = +inf: the
-        line search never accepts it (the energy is infinite there, not NaN).
+        line search never accepts it (the energy is infinite there, not NaN). Likewise a
+        state where a contact point touches or crosses an obstacle (:mod:`fem_anim.contact`).
         """
         start = time.perf_counter()
         self.set_state(x)
         if self.filter_inversion and not self.min_det_F() > 0.0:
             value = np.inf
+        elif self.contact is not None and not self.contact.min_distance() > 0.0:
+            value = np.inf  # a contact point on or through an obstacle: the barrier is +inf
         else:
             value = self.assemble_scalar(self.objective_form)
         self.assembly_s += time.perf_counter() - start
@@ -526,5 +553,7 @@ class EnergyProblem:
             data.update()
         values = {name: self.assemble_scalar(form) for name, form in self.energy_forms.items()}
         values.setdefault("gravity", 0.0)
-        values["total_energy"] = values["kinetic"] + values["elastic"] + values["gravity"]
+        values.setdefault("contact", 0.0)
+        values["total_energy"] = values["kinetic"] + values["elastic"] + values["gravity"] + \
+            values["contact"]
         return values

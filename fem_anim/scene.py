@@ -7,9 +7,10 @@ dotted key path, the constraint and the value.
 
 Sections describing the body and the run (``mesh``, ``element``, ``material``,
 ``time``, ``solver``, ``output``) fall back key by key to :data:`DEFAULTS`; physical
-terms (``gravity``, ``pin``) exist only when the scene declares them. ``[[region]]`` entries
-override the body's ``[material]`` on parts of the mesh (:mod:`fem_anim.region`);
-``[initial]`` gives the body a rigid initial velocity (:mod:`fem_anim.initial`).
+terms (``gravity``, ``pin``, ``obstacle``) exist only when the scene declares them.
+``[[region]]`` entries override the body's ``[material]`` on parts of the mesh
+(:mod:`fem_anim.region`); ``[initial]`` gives the body a rigid initial velocity
+(:mod:`fem_anim.initial`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,9 @@ MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohooke
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
 NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
+OBSTACLE_TYPES = ("plane", "sphere")
+#: Keys each obstacle type needs, and the geometric keys it must not be given.
+OBSTACLE_KEYS = {"plane": ("normal",), "sphere": ("center", "radius")}
 MAX_MAGNITUDE = 1.0e150  # larger values are taken as a typo or an attack, not physics
 MAX_CELLS = 2.0e7  # ~24 GB of memory for a P1 Newton step; larger is a typo, not a scene
 MAX_STEPS = 10**9  # frames; more is a typo (at 60 frames/s, 190 days of animation)
@@ -219,6 +223,18 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "angular_velocity": Key((int, float, list), None),
         "center": Key(list, None, None, (2, 3)),
     },
+    "obstacle": {  # static obstacles, contact as a barrier energy (forms/contact.py)
+        "name": Key(str, "obstacle"),
+        "type": Key(str, None, _one_of(OBSTACLE_TYPES)),
+        "point": Key(list, None, None, (2, 3)),
+        "normal": Key(list, None, None, (2, 3)),
+        "center": Key(list, None, None, (2, 3)),
+        "radius": Key(NUM, None, _positive),
+        "dhat": Key(NUM, 1.0e-3, _positive),
+        "stiffness": Key(NUM, None, _positive),
+        "friction": Key(NUM, 0.0, _non_negative),
+        "epsv": Key(NUM, 1.0e-3, _positive),
+    },
     "solver": {
         "preset": Key(str, "cholesky"),
         "method": Key(str, "newton", _one_of(NONLINEAR_METHODS)),
@@ -237,10 +253,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
 }
 #: Sections that exist only when a scene declares them (physical terms).
 OPTIONAL_SECTIONS = ("gravity", "damping", "initial")
-#: Sections that are arrays of tables (``[[pin]]``, ``[[region]]``).
-ARRAY_SECTIONS = ("pin", "region")
+#: Sections that are arrays of tables (``[[pin]]``, ``[[region]]``, ``[[obstacle]]``).
+ARRAY_SECTIONS = ("pin", "region", "obstacle")
 #: Keys without a default that a declared optional section must give.
-REQUIRED = {"gravity": ("acceleration",), "pin": ("min", "max"), "region": ("name",)}
+REQUIRED = {"gravity": ("acceleration",), "pin": ("min", "max"), "region": ("name",),
+            "obstacle": ("type",)}
 #: Keys of a ``[[region]]`` that override the body's ``[material]``.
 REGION_MATERIAL_KEYS = ("model", "youngs_modulus", "poisson_ratio", "density")
 
@@ -472,6 +489,8 @@ def _check_consistency(data: dict[str, Any]) -> None:
             raise SceneError(f"pin[{i}].axis is required with pin[{i}].angular_velocity")
     _check_regions(data)
     _check_initial(data)
+    for i, obstacle in enumerate(data["obstacle"]):
+        _check_obstacle(i, obstacle, d)
     if data["time"]["min_dt"] is not None and data["time"]["min_dt"] > data["time"]["dt"]:
         raise SceneError(f"time.min_dt must not exceed time.dt = {data['time']['dt']}, got "
                          f"{data['time']['min_dt']}")
@@ -534,6 +553,26 @@ def _check_initial(data: dict[str, Any]) -> None:
                          f"velocity vector, rad/s) for mesh.dim = 3, got {_show(omega)}")
     if all(initial[k] is None for k in ("velocity", "angular_velocity")):
         raise SceneError("[initial] needs velocity or angular_velocity")
+
+
+def _check_obstacle(i: int, obstacle: dict[str, Any], d: int) -> None:
+    """An obstacle has the keys of its type, of the scene's dimension, and no others."""
+    kind = obstacle["type"]
+    for key in OBSTACLE_KEYS[kind]:
+        if obstacle[key] is None:
+            raise SceneError(f"obstacle[{i}].{key} is required for type = \"{kind}\"")
+    other = [k for t, keys in OBSTACLE_KEYS.items() if t != kind for k in keys] + \
+        (["point"] if kind == "sphere" else [])
+    for key in other:
+        if obstacle[key] is not None:
+            raise SceneError(f"obstacle[{i}].{key} does not apply to type = \"{kind}\"")
+    for key in ("point", "normal", "center"):
+        if obstacle[key] is not None and len(obstacle[key]) != d:
+            raise SceneError(f"obstacle[{i}].{key} must have {d} entries for mesh.dim = {d}, "
+                             f"got {obstacle[key]}")
+    if kind == "plane" and math.hypot(*obstacle["normal"]) == 0.0:
+        raise SceneError(f"obstacle[{i}].normal must be a nonzero vector, got "
+                         f"{obstacle['normal']}")
 
 
 def _parse_toml(text: str) -> dict[str, Any]:

@@ -166,6 +166,8 @@ class Simulation:
             p.damping_coefficient.value = c
             p.u_anchor.x.array[:] = anchor
         p.set_pinned_displacement(state.time + h)
+        if p.contact is not None:
+            p.contact.stage(h)
         what = f"step {state.step + 1} (t = {state.time + h:.6g} s)"
         self._initial_guess(u_pred, state.u, what)
         stats = self.minimiser.solve(p.x_work, what=what)

@@ -15,7 +15,10 @@ the solver's prefix (default ``fem_anim_``), merged with the precedence of
 * ``hessian``: exact, shifted or projected (:mod:`fem_anim.hessian`);
 * ``inversion_filter``: the pre-check halves the Newton step until no element has
   det F <= 0, and the objective is +inf there (:meth:`EnergyProblem.objective`), so no
-  iterate with an inverted element is ever accepted.
+  iterate with an inverted element is ever accepted;
+* obstacles (``[[obstacle]]``): the pre-check scales the Newton direction so that no
+  line-search trial brings a contact point onto an obstacle
+  (:meth:`fem_anim.contact.ObstacleContact.step_bound`).
 """
 
 from __future__ import annotations
@@ -203,8 +206,9 @@ class Minimiser:
         inversion filter on, y is halved until x - y has det F > 0 everywhere.
         """
         self._decrements.append(0.5 * abs(self.b.dot(y)))
+        scaled = self._contact_bound(x, y)
         if not self.problem.filter_inversion:
-            return False
+            return scaled
         trial = x.duplicate()
         try:
             for halvings in range(MAX_FILTER_HALVINGS):
@@ -212,12 +216,24 @@ class Minimiser:
                 trial.axpy(-1.0, y)
                 self.problem.set_state(trial)
                 if self.problem.min_det_F() > 0.0:
-                    return halvings > 0
+                    return scaled or halvings > 0
                 y.scale(0.5)
             return True
         finally:
             trial.destroy()
             self.problem.set_state(x)
+
+    def _contact_bound(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
+        """Scale y so that no contact point of x - alpha y, 0 < alpha <= 1, nears an obstacle
+        by more than :data:`fem_anim.contact.KEEP_FRACTION` of its distance; whether it did."""
+        contact = getattr(self.problem, "contact", None)
+        if contact is None:
+            return False
+        self.problem.set_state(x)
+        alpha = contact.step_bound(y)
+        if alpha < 1.0:
+            y.scale(alpha)
+        return alpha < 1.0
 
     def _jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
         """The problem's Hessian, shifted by c I until it is positive definite if asked.
@@ -329,6 +345,10 @@ class Minimiser:
                 self._decrements.append(decrement)
                 if self.stopping == "decrement" and decrement <= self.decrement_tol:
                     return DECREMENT_REASON, norm
+                if getattr(self.problem, "contact", None) is not None:
+                    self.problem.set_state(x)  # a full step must keep clear of obstacles
+                    if self.problem.contact.step_bound(step) < 1.0:
+                        break
                 x.copy(trial)
                 trial.axpy(-1.0, step)
                 self.problem.residual(self.snes, trial, r_trial)

@@ -268,6 +268,33 @@ CORPUS = [
         f'name = "{PAYLOAD}"\n', fresh=True),
     Bad("payload-model", ("material.model must be one of", PAYLOAD),
         f'[material]\nmodel = "{PAYLOAD}"\n'),
+    # -- obstacles (contact) ----------------------------------------------------------------
+    Bad("obstacle-no-type", ("obstacle[0].type is required",),
+        "[[obstacle]]\nnormal = [0, 0, 1]\n"),
+    Bad("obstacle-bad-type", ("obstacle[0].type must be one of plane, sphere", "'cube'"),
+        '[[obstacle]]\ntype = "cube"\n', fresh=True),
+    Bad("obstacle-plane-no-normal", ('obstacle[0].normal is required for type = "plane"',),
+        '[[obstacle]]\ntype = "plane"\n'),
+    Bad("obstacle-zero-normal", ("obstacle[0].normal must be a nonzero vector", "[0, 0, 0]"),
+        '[[obstacle]]\ntype = "plane"\nnormal = [0, 0, 0]\n'),
+    Bad("obstacle-normal-2d", ("obstacle[0].normal must have 3 entries", "[0, 1]"),
+        '[[obstacle]]\ntype = "plane"\nnormal = [0, 1]\n'),
+    Bad("obstacle-sphere-no-center", ('obstacle[0].center is required for type = "sphere"',),
+        '[[obstacle]]\ntype = "sphere"\nradius = 1\n'),
+    Bad("obstacle-negative-radius", ("obstacle[0].radius must be > 0", "-1"),
+        '[[obstacle]]\ntype = "sphere"\ncenter = [0, 0, -2]\nradius = -1\n'),
+    Bad("obstacle-radius-on-plane", ('obstacle[0].radius does not apply to type = "plane"',),
+        '[[obstacle]]\ntype = "plane"\nnormal = [0, 0, 1]\nradius = 1\n'),
+    Bad("obstacle-zero-dhat", ("obstacle[0].dhat must be > 0", "0"),
+        '[[obstacle]]\ntype = "plane"\nnormal = [0, 0, 1]\ndhat = 0\n'),
+    Bad("obstacle-negative-friction", ("obstacle[0].friction must be >= 0", "-0.3"),
+        '[[obstacle]]\ntype = "plane"\nnormal = [0, 0, 1]\nfriction = -0.3\n'),
+    Bad("obstacle-nan-stiffness", ("obstacle[0].stiffness must be finite", "nan"),
+        '[[obstacle]]\ntype = "plane"\nnormal = [0, 0, 1]\nstiffness = nan\n'),
+    Bad("obstacle-unknown-key", ("unknown key obstacle[0].height",),
+        '[[obstacle]]\ntype = "plane"\nnormal = [0, 0, 1]\nheight = 1\n'),
+    Bad("obstacle-not-array", ("obstacle must be an array of tables",),
+        '[obstacle]\ntype = "plane"\nnormal = [0, 0, 1]\n'),
     # -- --set on a scene file --------------------------------------------------------------
     Bad("set-key-into-list", ("--set pin.first.min: pin is a list; give an entry number",),
         PIN, args=("--set", "pin.first.min=[0, 0, 0]"), fresh=True),
@@ -462,7 +489,7 @@ def table(section: str, junk: bool) -> st.SearchStrategy:
     return st.fixed_dictionaries({}, optional=values)
 
 
-SECTIONS = [s for s in SCHEMA if s and s != "pin"]
+SECTIONS = [s for s in SCHEMA if s and s not in ("pin", "obstacle")]
 WILD_SCENES = st.fixed_dictionaries({}, optional={
     "name": st.one_of(st.from_regex(r"[a-z][a-z_]{0,8}", fullmatch=True), JUNK),
     **{s: st.one_of(table(s, True), JUNK) for s in SECTIONS},

@@ -9,11 +9,18 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.assembly` - global elastic energy, gradient and Hessian (eq. (27));
 * :mod:`.mass` - consistent and lumped mass matrices (eqs. (17)-(20)), gravity potential;
 * :mod:`.problem` - the potential energy with mass and pins;
+* :mod:`.contact` - the IPC log barrier against a plane or sphere obstacle (vertex rule);
 * :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
 * :mod:`.integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
 """
 
 from fem_anim.reference.assembly import elastic_energy, elastic_gradient, elastic_hessian
+from fem_anim.reference.contact import (
+    boundary_facets,
+    contact_energy,
+    contact_gradient,
+    contact_hessian,
+)
 from fem_anim.reference.geometry import (
     cell_dofs,
     cell_volumes,
@@ -54,10 +61,14 @@ __all__ = [
     "State",
     "Trajectory",
     "bdf2_step",
+    "boundary_facets",
     "box_mesh",
     "build_problem",
     "cell_dofs",
     "cell_volumes",
+    "contact_energy",
+    "contact_gradient",
+    "contact_hessian",
     "deformation_gradient",
     "deformed_shape_matrix",
     "elastic_energy",
