@@ -103,7 +103,7 @@ def fd_gradient(fun, F: np.ndarray, h: float = H) -> np.ndarray:
     """Central differences of ``fun`` (scalar- or tensor-valued) with respect to ``F``."""
     d = F.shape[0]
     out = None
-    for k, l in np.ndindex(d, d):
+    for k, l in np.ndindex(d, d):  # noqa: E741 (the index names of the maths)
         E = np.zeros((d, d))
         E[k, l] = h
         g = (np.asarray(fun(F + E)) - np.asarray(fun(F - E))) / (2 * h)
@@ -115,7 +115,7 @@ def fd_gradient(fun, F: np.ndarray, h: float = H) -> np.ndarray:
 
 def linear_rest_hessian(d: int) -> np.ndarray:
     """``mu (δik δjl + δil δjk) + lmbda δij δkl``, the Hessian of linear elasticity."""
-    I = np.eye(d)
+    I = np.eye(d)  # noqa: E741 (the identity, as in the maths)
     return (
         MU * (np.einsum("ik,jl->ijkl", I, I) + np.einsum("il,jk->ijkl", I, I))
         + LMBDA * np.einsum("ij,kl->ijkl", I, I)
