@@ -38,6 +38,8 @@ VIEWS = {
 }
 #: Scalar bar titles of the fields ``render.color_by`` names.
 FIELD_LABELS = {"displacement": "displacement (m)", "energy_density": "psi (J/m^3)"}
+#: Narrower pictures have no scalar bar (its labels would cover the body).
+MIN_SCALAR_BAR_WIDTH = 240
 #: The ``[render]`` table's defaults (see fem_anim/scene.py), for a bare ``render_frame``.
 DEFAULT_SETTINGS = {"color_by": "displacement", "colormap": "viridis", "view": "auto",
                     "camera_position": None, "focal_point": None, "view_up": None,
@@ -96,6 +98,7 @@ class FrameRenderer:
         lo, hi = clim
         plotter.add_mesh(self.grid, scalars=label, cmap=settings["colormap"],
                          clim=(lo, hi if hi > lo else lo + 1.0),
+                         show_scalar_bar=width >= MIN_SCALAR_BAR_WIDTH,
                          show_edges=settings["show_edges"],
                          edge_color="#404040" if ink == "black" else "#a0a0a0",
                          scalar_bar_args={"title": label, "color": ink, "vertical": True,
