@@ -101,9 +101,10 @@ class FrameRenderer:
                          show_scalar_bar=width >= MIN_SCALAR_BAR_WIDTH,
                          show_edges=settings["show_edges"],
                          edge_color="#404040" if ink == "black" else "#a0a0a0",
-                         scalar_bar_args={"title": label, "color": ink, "vertical": True,
-                                          "position_x": 0.86, "position_y": 0.1,
-                                          "width": 0.1, "height": 0.8, "fmt": "%.2g"})
+                         scalar_bar_args={"title": label, "color": ink, "vertical": False,
+                                          "position_x": 0.25, "position_y": 0.03,
+                                          "width": 0.5, "height": 0.1, "fmt": "%.2g",
+                                          "n_labels": 3})
         rest = pv.UnstructuredGrid(topology, types, X)
         plotter.add_mesh(rest, style="wireframe", color="grey", opacity=0.25)
         self.text = plotter.add_text("", position="upper_left", font_size=8, color=ink)
