@@ -145,44 +145,62 @@ def render_directory(path: Path, settings: dict) -> dict:
     """Render the run in ``path`` as configured by ``settings`` (the ``[render]`` table).
 
     Returns:
-        What was made: ``frames``, ``seconds_per_frame``, ``fps``, ``gif_frames``.
+        What was made: ``frames`` rendered, ``seconds_per_frame``, ``fps``, ``gif_frames``.
 
     Raises:
         FemAnimError: for a directory that is not a finished run, or a field it lacks.
     """
-    import imageio.v3 as iio
-    import imageio_ffmpeg
-
     from .plots import write_plots
-    from .render import FrameRenderer
 
     path = Path(path)
     check_run_directory(path)
     run = read_run(path)
-    values = frame_values(run, settings["color_by"])
-    lo, hi = min(0.0, float(values.min())), float(values.max())
+    staging = path / ".rendering"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir()
+    try:
+        made = _render_frames(run, settings, staging, _run_name(path))
+        write_plots(path / "stats.csv", staging)
+        _move_into_place(staging, path)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    print(f"rendered {made['frames']} frames ({made['seconds_per_frame']:.3f} s per frame, "
+          f"{made['size']} pixels, {made['fps']:.4g} frames/s) into {path}", flush=True)
+    return made
+
+
+def _bounds(run: RunFrames) -> np.ndarray:
+    """(xmin, xmax, ymin, ymax, zmin, zmax) around the rest shape and every frame's."""
     x = np.concatenate([run.points[None], run.points[None] + run.displacement])
-    bounds = np.ravel(np.column_stack([x.reshape(-1, x.shape[2]).min(axis=0),
-                                       x.reshape(-1, x.shape[2]).max(axis=0)]))
-    if bounds.size == 4:
-        bounds = np.concatenate([bounds, [0.0, 0.0]])
+    x = x.reshape(-1, x.shape[2])
+    bounds = np.ravel(np.column_stack([x.min(axis=0), x.max(axis=0)]))
+    return np.concatenate([bounds, np.zeros(6 - bounds.size)])
+
+
+def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str) -> dict:
+    """Frames, GIF, MP4 and final.png into ``staging``, one renderer for all frames."""
+    import imageio.v3 as iio
+    import imageio_ffmpeg
+
+    from .render import FrameRenderer
+
+    values = frame_values(run, settings["color_by"])
+    clim = (min(0.0, float(values.min())), float(values.max()))
     fps = _frame_rate(settings, run.times)
     stride = gif_stride(fps)
     outputs = set(settings["outputs"])
-    staging = path / ".rendering"
-    shutil.rmtree(staging, ignore_errors=True)
-    (staging / "frames").mkdir(parents=True)
-    name = _run_name(path)
-    width = max(4, len(str(run.times.size - 1)))
-    renderer = FrameRenderer(run.points, run.cells, settings, (lo, hi), bounds)
-    video = gif = None
+    last = run.times.size - 1
+    order = range(last + 1) if outputs else [last]  # no outputs: final.png only
+    width = max(4, len(str(last)))
+    if "frames" in outputs:
+        (staging / "frames").mkdir()
+    renderer = FrameRenderer(run.points, run.cells, settings, clim, _bounds(run))
+    video, gif = None, []
     start = time.perf_counter()
     try:
-        gif = []
-        last = run.times.size - 1
-        for k in range(last + 1) if outputs else [last]:  # no outputs: final.png only
-            t = run.times[k]
-            image = renderer.render(run.displacement[k], values[k], f"{name}  t = {t:.3f} s")
+        for k in order:
+            image = renderer.render(run.displacement[k], values[k],
+                                    f"{name}  t = {run.times[k]:.3f} s")
             if "frames" in outputs:
                 iio.imwrite(staging / "frames" / f"frame_{k:0{width}d}.png", image)
             if "gif" in outputs and k % stride == 0:
@@ -193,24 +211,16 @@ def render_directory(path: Path, settings: dict) -> dict:
                     video = _video_writer(staging / "animation.mp4", frame.shape, fps,
                                           imageio_ffmpeg)
                 video.send(frame)
-            if k == last:
-                iio.imwrite(staging / "final.png", image)
-        seconds = (time.perf_counter() - start) / (last + 1 if outputs else 1)
+        iio.imwrite(staging / "final.png", image)
+        seconds = (time.perf_counter() - start) / len(order)
     finally:
         renderer.close()
         if video is not None:
             video.close()
     if gif:
         _write_gif(staging / "animation.gif", gif, 1000.0 * stride / fps)
-    if "frames" not in outputs:
-        (staging / "frames").rmdir()
-    write_plots(path / "stats.csv", staging)
-    _move_into_place(staging, path)
-    print(f"rendered {run.times.size if outputs else 1} frames ({seconds:.3f} s per frame, "
-          f"{image.shape[1]}x{image.shape[0]} pixels, "
-          f"{fps:.4g} frames/s) into {path}", flush=True)
-    return {"frames": run.times.size if outputs else 1, "seconds_per_frame": seconds, "fps": fps,
-            "gif_frames": len(gif or [])}
+    return {"frames": len(order), "seconds_per_frame": seconds, "fps": fps,
+            "gif_frames": len(gif), "size": f"{image.shape[1]}x{image.shape[0]}"}
 
 
 def _write_gif(path: Path, images: list[np.ndarray], duration_ms: float) -> None:

@@ -232,3 +232,28 @@ def test_energy_density_under_mpi_equals_serial(tmp_path, beam):
     serial = meshio.read(beam / "final.vtu").cell_data["energy_density"][0]
     parallel = meshio.read(out / "final.vtu").cell_data["energy_density"][0]
     np.testing.assert_allclose(parallel, serial, rtol=1e-7, atol=1e-9 * serial.max())
+
+
+def test_explicit_camera_and_final_only(fall):
+    """render.camera_position moves the picture; render.outputs = [] makes final.png only."""
+    before = iio.imread(fall / "final.png")
+    assert main(["render", str(fall), "-q", "--set", "render.camera_position=[0.1,-2,1]",
+                 "--set", "render.view_up=[0,0,1]", "--set", "render.outputs=[]"]) == 0
+    after = iio.imread(fall / "final.png")
+    assert after.shape == before.shape and np.abs(after.astype(int) - before).sum() > 0
+    assert (fall / "energies.png").is_file() and (fall / "frames").is_dir()
+
+
+@pytest.mark.slow
+def test_energy_density_p2_sums_to_the_elastic_energy(tmp_path):
+    """P2: psi varies in a cell; its cell means weighted by |K| give the elastic energy."""
+    out = tmp_path / "p2"
+    assert main(["run", "-o", str(out), "-q", *BEAM, "--set", "element.degree=2",
+                 "--set", "time.steps=2", "--set", "output.render=false"]) == 0
+    final = meshio.read(out / "final.vtu")
+    cells = final.cells_dict["tetra"]
+    with open(out / "stats.csv") as f:
+        elastic = [float(row["elastic"]) for row in csv.DictReader(f)][-1]
+    field = final.cell_data["energy_density"][0]
+    assert elastic > 1.0
+    assert np.dot(cell_volumes(final.points, cells), field) == pytest.approx(elastic, rel=1e-10)
