@@ -255,5 +255,5 @@ def test_energy_density_p2_sums_to_the_elastic_energy(tmp_path):
     with open(out / "stats.csv") as f:
         elastic = [float(row["elastic"]) for row in csv.DictReader(f)][-1]
     field = final.cell_data["energy_density"][0]
-    assert elastic > 1.0
+    assert elastic > 1e-3
     assert np.dot(cell_volumes(final.points, cells), field) == pytest.approx(elastic, rel=1e-10)
