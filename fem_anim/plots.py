@@ -86,7 +86,7 @@ def write_plots(stats_csv: Path, directory: Path, dpi: int = 100) -> list[Path]:
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
     top.set_title(f"Solver effort: {int(s['newton_its'].sum())} Newton and "
-                  f"{int(s['linear_its'].sum())} linear iterations in {t.size} steps")
+                  f"{int(s['linear_its'].sum())} linear iterations in {t.size} accepted steps")
     if substep.any() or retried.any():
         top.legend(fontsize="small")
     bottom.set_xlabel("time (s)")

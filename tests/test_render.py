@@ -210,7 +210,11 @@ def test_render_accepts_only_render_keys(beam, capsys):
 
 
 def test_no_pictures_when_rendering_is_off(tmp_path):
+    """... and a new run into a directory removes the old run's pictures."""
     out = tmp_path / "quiet"
+    assert main(["run", "-o", str(out), "-q", *BEAM, "--set", "time.steps=1",
+                 "--set", 'render.outputs=["frames"]']) == 0
+    assert (out / "final.png").is_file() and (out / "frames" / "frame_0001.png").is_file()
     assert main(["run", "-o", str(out), "-q", *BEAM, "--set", "output.render=false",
                  "--set", "time.steps=1"]) == 0
     names = {p.name for p in out.iterdir()}
@@ -257,3 +261,27 @@ def test_energy_density_p2_sums_to_the_elastic_energy(tmp_path):
     field = final.cell_data["energy_density"][0]
     assert elastic > 1e-3
     assert np.dot(cell_volumes(final.points, cells), field) == pytest.approx(elastic, rel=1e-10)
+
+
+def test_plots_mark_retries_and_substeps(tmp_path):
+    """stats.csv with a retried, halved step: the plots are drawn from its columns."""
+    from fem_anim.output import STATS_COLUMNS
+    from fem_anim.plots import read_stats, write_plots
+
+    rows = [dict.fromkeys(STATS_COLUMNS, 0.0) | {"step": k + 1, "time": t, "dt": dt,
+                                                  "retries": r, "newton_its": 3 + r,
+                                                  "linear_its": 3 + r, "kinetic": t,
+                                                  "gravity": -t, "total_energy": 0.0}
+            for k, (t, dt, r) in enumerate([(0.1, 0.1, 0), (0.15, 0.05, 2), (0.2, 0.05, 0),
+                                            (0.3, 0.1, 0)])]
+    with open(tmp_path / "stats.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=STATS_COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+    stats = read_stats(tmp_path / "stats.csv")
+    np.testing.assert_array_equal(stats["retries"], [0, 2, 0, 0])
+    for path in write_plots(tmp_path / "stats.csv", tmp_path):
+        assert iio.imread(path).std() > 10
+    (tmp_path / "bad.csv").write_text("step,time\n1,x\n")
+    with pytest.raises(Exception, match="bad.csv has no column dt"):
+        read_stats(tmp_path / "bad.csv")
