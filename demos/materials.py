@@ -47,7 +47,8 @@ rank0 = MPI.COMM_WORLD.rank == 0
 results = {}
 for model in MODELS:
     scene = load_scene(None, [f'material.model="{model}"', f"time.steps={steps}",
-                              f"mesh.element_size={element_size}", f'name="{model}"'])
+                              f"mesh.element_size={element_size}", f'name="{model}"',
+                              *(["render.outputs=[]"] if REDUCED else [])])  # final.png only
     sim = Simulation(scene, MPI.COMM_WORLD)
     run = sim.run(OUT / model, quiet=True)
     swing = max(abs(r["gravity"]) for r in run.rows)

@@ -2,6 +2,7 @@
 
     fem-anim run [SCENE.toml] [-o OUTDIR] [--set KEY=VALUE ...] [--solver NAME] [--quiet]
                  [PETSc options ...]
+    fem-anim render OUTDIR [--set render.KEY=VALUE ...] [--quiet]
     fem-anim solvers
 
 PETSc options (``-snes_*``, ``-ksp_*``, ``-pc_*``, ``-mat_*`` and global ones such as
@@ -42,6 +43,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.add_argument("--resume", metavar="OUTDIR",
                      help="continue the unfinished run in OUTDIR from its last checkpoint")
+    render = sub.add_parser("render", help="render a saved run again (no simulation)")
+    render.add_argument("outdir", help="the output directory of a finished `fem-anim run`")
+    render.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="render.KEY=VALUE", help="override a [render] key")
+    render.add_argument("-q", "--quiet", action="store_true", help="print nothing")
     sub.add_parser("solvers", help="list the linear solver presets and their PETSc options")
     return parser
 
@@ -90,6 +96,30 @@ def _run(args, cli_options: dict[str, str]) -> int:
     return 0
 
 
+def _render(args) -> int:
+    """Re-render a saved run with its own ``[render]`` settings and the overrides (rank 0)."""
+    import json
+
+    from mpi4py import MPI
+
+    from .animation import check_run_directory
+    from .render import render_run
+    from .scene import validate_render
+
+    outdir = Path(args.outdir)
+    check_run_directory(outdir)
+    saved = None
+    if (outdir / "scene.json").is_file():
+        try:
+            saved = json.loads((outdir / "scene.json").read_text())["scene"].get("render")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+            raise FemAnimError(f"{outdir / 'scene.json'} cannot be read: {err}") from None
+    settings = validate_render(saved, args.overrides)
+    if MPI.COMM_WORLD.rank == 0:
+        render_run(outdir, settings, quiet=args.quiet)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``fem-anim``; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -102,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
 
             print(describe_presets())
             return 0
+        if args.command == "render":
+            return _render(args)
         return _run(args, solver_options)
     except FemAnimError as err:
         _print_error(str(err))

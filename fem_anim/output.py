@@ -6,14 +6,17 @@ run. Everything is written into a staging directory ``OUTDIR/.partial`` and move
 ``OUTDIR`` only when the run succeeds (:class:`RunDirectory`): a failed run leaves no
 file posing as a result.
 
-Files: ``trajectory.xdmf`` + ``trajectory.h5`` (displacement per frame, ParaView and
-meshio read it), ``stats.csv`` (one row per step), ``final.vtu`` (point data
-``displacement``) and, from :mod:`fem_anim.render`, ``final.png``.
+Files: ``trajectory.xdmf`` + ``trajectory.h5`` (displacement and cell energy density
+per frame, ParaView and meshio read it), ``stats.csv`` (one row per step), ``final.vtu``
+(point data ``displacement``, cell data ``energy_density``), ``scene.json`` (the validated
+scene) and, from :mod:`fem_anim.animation` and :mod:`fem_anim.plots`, the pictures in
+:data:`RENDER_PRODUCTS`.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import os
 import shutil
 from pathlib import Path
@@ -25,9 +28,13 @@ from . import compat
 from .errors import FemAnimError
 from .mesh import SimplexMesh
 
-__all__ = ["VertexGather", "RunDirectory", "StatsWriter", "TrajectoryWriter", "write_final",
-           "write_atomically", "STATS_COLUMNS"]
+__all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "TrajectoryWriter",
+           "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS"]
 
+#: Files :mod:`fem_anim.animation` and :mod:`fem_anim.plots` make from a run: a new run
+#: into the same directory removes the old ones, so no picture outlives its data.
+RENDER_PRODUCTS = ("final.png", "frames", "animation.gif", "animation.mp4", "energies.png",
+                   "newton.png")
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "newton_decrement", "shift", "kinetic", "elastic", "gravity",
                  "contact", "total_energy", "assembly_s", "factor_s", "linear_solve_s", "other_s",
@@ -60,6 +67,32 @@ class VertexGather:
         if self.comm.rank != 0:
             return None
         out = np.empty((self.num_points, self.bs))
+        for index, part in parts:
+            out[index] = part
+        return out
+
+
+class CellGather:
+    """Collects per-cell values of the owned cells on rank 0 in input cell order.
+
+    DOLFINx keeps each cell's row in the input array (``topology.original_cell_index``);
+    the owned cells of all ranks together are the input cells, each once.
+    """
+
+    def __init__(self, domain: SimplexMesh):
+        topology = domain.mesh.topology
+        self.comm: MPI.Comm = domain.mesh.comm
+        num_owned = topology.index_map(topology.dim).size_local
+        self.input_index = np.asarray(topology.original_cell_index, np.int64)[:num_owned]
+        self.num_cells = self.comm.bcast(domain.cells.shape[0] if self.comm.rank == 0
+                                         else None, root=0)
+
+    def gather(self, values: np.ndarray) -> np.ndarray | None:
+        """Values of the owned cells (local order) as (num_cells,) on rank 0, else ``None``."""
+        parts = self.comm.gather((self.input_index, values), root=0)
+        if self.comm.rank != 0:
+            return None
+        out = np.empty(self.num_cells)
         for index, part in parts:
             out[index] = part
         return out
@@ -102,6 +135,12 @@ class RunDirectory:
         """Move every staged file into place (each rename is atomic); drop the checkpoint."""
         if self.comm.rank == 0:
             (self.staging / "checkpoint.npz").unlink(missing_ok=True)
+            for name in RENDER_PRODUCTS:
+                old = self.path / name
+                if old.is_dir() and not old.is_symlink():
+                    shutil.rmtree(old)
+                else:
+                    old.unlink(missing_ok=True)
             for item in self.staging.iterdir():
                 os.replace(item, self.path / item.name)
             self.staging.rmdir()
@@ -150,10 +189,11 @@ def write_atomically(path: Path, data: bytes) -> None:
 
 
 class TrajectoryWriter:
-    """``trajectory.xdmf`` + ``.h5``: the displacement at each written frame (rank 0).
+    """``trajectory.xdmf`` + ``.h5``: displacement and energy density per frame (rank 0).
 
-    The layout is meshio's (``data0`` points, ``data1`` cells, ``data{k+2}`` frame k), so
-    meshio's TimeSeriesReader and ParaView read it. Each frame is flushed to the HDF5 file
+    The layout is meshio's (``data0`` points, ``data1`` cells, ``data{k+2}`` frame k's
+    vertex displacements, plus ``energy_density{k}`` its cells' mean psi), so meshio's
+    TimeSeriesReader and ParaView read it. Each frame is flushed to the HDF5 file
     and the small XDMF file is rewritten atomically, listing only complete frames: after
     a kill between frames the pair is readable, and :meth:`reopen` continues it.
     """
@@ -179,12 +219,18 @@ class TrajectoryWriter:
             self.times = [float(t) for t in self.h5.attrs["times"][:keep_frames]]
             for k in range(keep_frames, len(self.h5.attrs["times"])):
                 del self.h5[f"data{k + 2}"]
+                if f"energy_density{k}" in self.h5:
+                    del self.h5[f"energy_density{k}"]
             self._sync()
 
-    def write(self, time: float, displacement: np.ndarray | None) -> None:
+    def write(self, time: float, displacement: np.ndarray | None,
+              energy_density: np.ndarray | None) -> None:
+        """Append a frame: vertex displacements (input order) and cell energy densities."""
         if not self.rank0:
             return
-        self.h5.create_dataset(f"data{len(self.times) + 2}", data=_pad3(displacement))
+        k = len(self.times)
+        self.h5.create_dataset(f"energy_density{k}", data=energy_density)
+        self.h5.create_dataset(f"data{k + 2}", data=_pad3(displacement))
         self.times.append(time)
         self._sync()
 
@@ -203,7 +249,10 @@ class TrajectoryWriter:
             f'<Grid><xi:include xpointer="{mesh}" /><Time Value="{t!r}" />'
             f'<Attribute Name="displacement" AttributeType="Vector" Center="Node">'
             f'<DataItem DataType="Float" Dimensions="{n} 3" Format="HDF" Precision="8">'
-            f"{h5}:/data{k + 2}</DataItem></Attribute></Grid>"
+            f"{h5}:/data{k + 2}</DataItem></Attribute>"
+            f'<Attribute Name="energy_density" AttributeType="Scalar" Center="Cell">'
+            f'<DataItem DataType="Float" Dimensions="{m}" Format="HDF" Precision="8">'
+            f"{h5}:/energy_density{k}</DataItem></Attribute></Grid>"
             for k, t in enumerate(self.times))
         return (
             '<Xdmf xmlns:xi="http://www.w3.org/2003/XInclude" Version="3.0"><Domain>'
@@ -220,12 +269,23 @@ class TrajectoryWriter:
             self.h5.close()
 
 
-def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None) -> None:
-    """``final.vtu``: the input mesh with point data ``displacement`` (rank 0)."""
+def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None,
+                energy_density: np.ndarray | None = None) -> None:
+    """``final.vtu``: the input mesh with point data ``displacement`` and cell data
+    ``energy_density`` (rank 0)."""
     if domain.mesh.comm.rank != 0:
         return
     import meshio
 
     cell_type = {2: "triangle", 3: "tetra"}[domain.points.shape[1]]
+    cell_data = {} if energy_density is None else {"energy_density": [energy_density]}
     meshio.write(path, meshio.Mesh(_pad3(domain.points), [(cell_type, domain.cells)],
-                                   point_data={"displacement": _pad3(displacement)}))
+                                   point_data={"displacement": _pad3(displacement)},
+                                   cell_data=cell_data))
+
+
+def write_scene(path: Path, scene, comm: MPI.Comm) -> None:
+    """``scene.json``: the validated scene of the run, for ``fem-anim render`` (rank 0)."""
+    if comm.rank == 0:
+        write_atomically(path, (json.dumps({"source": scene.source, "scene": scene.data},
+                                           indent=1) + "\n").encode())

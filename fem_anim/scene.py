@@ -28,7 +28,8 @@ from typing import Any
 
 from .errors import SceneError
 
-__all__ = ["Scene", "load_scene", "parse_override", "DEFAULTS", "SCHEMA", "default_scene_text"]
+__all__ = ["Scene", "load_scene", "parse_override", "validate_render", "DEFAULTS", "SCHEMA",
+           "default_scene_text"]
 
 MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
                    "corotated_lagged")
@@ -161,6 +162,46 @@ def _check_string(path: str, value: str) -> None:
         raise SceneError(f"{path} must not contain control characters, got {_show(value)}")
 
 
+#: What ``render.color_by`` may name: vertex |displacement| or the cells' mean psi.
+COLOR_FIELDS = ("displacement", "energy_density")
+#: Named camera views (``auto``: ``side`` in 3D, ``xy`` in 2D; see fem_anim/render.py).
+VIEWS = ("auto", "side", "iso", "xy", "xz", "yz")
+#: What ``render.outputs`` may list: PNG frames, an animated GIF, an MP4 video.
+RENDER_OUTPUTS = ("frames", "gif", "mp4")
+
+
+def _colormap(v) -> str | None:
+    import matplotlib  # only when a scene names a colormap: the default costs no import
+
+    if v in matplotlib.colormaps:
+        return None
+    close = [name for name in matplotlib.colormaps if name.lower() == v.lower()]
+    hint = f" (did you mean {close[0]!r}?)" if close else " (see matplotlib's colormap list)"
+    return "must be a matplotlib colormap name" + hint
+
+
+def _color(v) -> str | None:
+    import matplotlib.colors
+
+    return None if matplotlib.colors.is_color_like(v) else \
+        "must be a colour name or '#rrggbb' (matplotlib's colour names)"
+
+
+def _window_size(v) -> str | None:
+    ok = all(isinstance(c, int) and 16 <= c <= 4096 for c in v)
+    return None if ok else "must be two whole numbers of pixels in 16..4096"
+
+
+def _fps(v) -> str | None:
+    return None if 0 < v <= 240 else "must be in (0, 240] frames per second"
+
+
+def _outputs(v) -> str | None:
+    ok = all(isinstance(c, str) for c in v) and set(v) <= set(RENDER_OUTPUTS) and \
+        len(set(v)) == len(v)
+    return None if ok else f"must be a list of distinct names from {', '.join(RENDER_OUTPUTS)}"
+
+
 NUM = (int, float)
 SCHEMA: dict[str, dict[str, Key]] = {
     "": {"name": Key(str, "scene", _scene_name)},
@@ -249,6 +290,20 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "every": Key(int, 1, lambda v: None if v >= 1 else "must be >= 1"),
         "checkpoint_every": Key(int, None, lambda v: None if v >= 1 else "must be >= 1"),
         "render": Key(bool, True),
+    },
+    "render": {
+        "color_by": Key(str, "displacement", _one_of(COLOR_FIELDS)),
+        "colormap": Key(str, "viridis", _colormap),
+        "view": Key(str, "auto", _one_of(VIEWS)),
+        "camera_position": Key(list, None, None, (3,)),
+        "focal_point": Key(list, None, None, (3,)),
+        "view_up": Key(list, None, lambda v: None if any(v) else "must not be the zero vector",
+                       (3,)),
+        "background": Key(str, "white", _color),
+        "window_size": Key(list, [800, 600], _window_size, (2,)),
+        "fps": Key(NUM, None, _fps),
+        "outputs": Key(list, list(RENDER_OUTPUTS), _outputs),
+        "show_edges": Key(bool, True),
     },
 }
 #: Sections that exist only when a scene declares them (physical terms).
@@ -494,6 +549,7 @@ def _check_consistency(data: dict[str, Any]) -> None:
     if data["time"]["min_dt"] is not None and data["time"]["min_dt"] > data["time"]["dt"]:
         raise SceneError(f"time.min_dt must not exceed time.dt = {data['time']['dt']}, got "
                          f"{data['time']['min_dt']}")
+    _check_render(data["render"])
     if data["element"]["degree"] == 2 and data["material"]["mass"] == "lumped":
         raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
                          "(row-sum lumping of P2 gives zero or negative vertex masses); use "
@@ -575,6 +631,17 @@ def _check_obstacle(i: int, obstacle: dict[str, Any], d: int) -> None:
                          f"{obstacle['normal']}")
 
 
+def _check_render(render: dict[str, Any]) -> None:
+    """A camera given by position: the focal point and up vector need it, and differ from it."""
+    position = render["camera_position"]
+    for key in ("focal_point", "view_up"):
+        if render[key] is not None and position is None:
+            raise SceneError(f"render.{key} needs render.camera_position (or use render.view)")
+    if position is not None and render["focal_point"] == position:
+        raise SceneError(f"render.focal_point must differ from render.camera_position, got "
+                         f"{position}")
+
+
 def _parse_toml(text: str) -> dict[str, Any]:
     """``tomllib.loads``, with its non-TOML failures turned into ``TOMLDecodeError``."""
     try:
@@ -641,3 +708,25 @@ def load_scene(path: str | Path | None = None, overrides: list[str] = ()) -> Sce
     except SceneError as err:
         raise SceneError(f"{source}: {err}") from None
     return Scene(data=data, source=source, base_dir=base)
+
+
+def validate_render(saved: Mapping[str, Any] | None, overrides: list[str] = ()) -> dict[str, Any]:
+    """The ``[render]`` settings of a saved run, with ``--set render.KEY=VALUE`` applied.
+
+    ``fem-anim render OUTDIR`` re-renders a run with the settings it was run with
+    (``scene.json``), changed only by ``render.*`` overrides: the simulation is not redone,
+    so other keys cannot change.
+
+    Raises:
+        SceneError: for an override outside ``render``, or a bad value (naming the key).
+    """
+    table = {"render": {k: v for k, v in (saved or {}).items() if v is not None}}
+    for item in overrides:
+        path, value = parse_override(item)
+        if path[0] != "render" or len(path) != 2:
+            raise SceneError(f"--set {'.'.join(path)}: only render.* keys can change when a "
+                             "saved run is rendered again (run the scene to change others)")
+        _apply_override(table, path, value)
+    render = _validate_table("render", table["render"], SCHEMA["render"], "render")
+    _check_render(render)
+    return render

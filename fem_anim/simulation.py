@@ -26,7 +26,8 @@ from .errors import ConvergenceError, FemAnimError
 from .initial import initial_velocity
 from .integrator import Integrator, State
 from .mesh import SimplexMesh, build_mesh
-from .output import RunDirectory, StatsWriter, TrajectoryWriter, VertexGather, write_final
+from .output import (CellGather, RunDirectory, StatsWriter, TrajectoryWriter, VertexGather,
+                     write_final, write_scene)
 from .petsc_options import flatten_options, merge_options
 from .presets import NEWTON_DEFAULTS, drop_replaced, parallel_note, preset_options
 from .problem import EnergyProblem
@@ -99,6 +100,7 @@ class Simulation:
         self.integrator = Integrator(scene["time"]["integrator"])
         self.minimiser = Minimiser(self.problem, options, settings=scene["solver"])
         self.gather = VertexGather(self.domain, self.problem.V)
+        self.cell_gather = CellGather(self.domain)
 
     # -- state ----------------------------------------------------------------------------
     def initial_state(self) -> State:
@@ -241,7 +243,32 @@ class Simulation:
             raise
         if run_dir is not None:
             run_dir.commit()
+            if self.scene["output"]["render"]:
+                self._render(run_dir.path, quiet)
         return result
+
+    def _render(self, path: Path, quiet: bool) -> None:
+        """Pictures of the committed run (rank 0, in another process); errors are collective.
+
+        A failed rendering keeps the run's data: ``fem-anim render`` can try again.
+        """
+        error = None
+        if self.comm.rank == 0:
+            from .render import render_run
+
+            try:
+                render_run(path, self.scene["render"], quiet=quiet)
+            except (FemAnimError, RuntimeError) as err:
+                error = f"{err} (the run's data are kept in {path}: render them again with " \
+                        f"`fem-anim render {path}`)"
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise FemAnimError(error)
+
+    def frame_fields(self, state: State) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Vertex displacements and cell energy densities of ``state`` on rank 0 (collective)."""
+        return (self.gather.gather(state.u),
+                self.cell_gather.gather(self.problem.cell_energy_density(state.u)))
 
     def _loop(self, h, steps, every, run_dir, quiet, resume) -> RunResult:
         stepper = AdaptiveStepper(self, h, self.scene["time"])
@@ -263,14 +290,14 @@ class Simulation:
         progress.update(0, advance=first - 1)
         try:
             if trajectory and not resume:
-                trajectory.write(0.0, self.gather.gather(state.u))
+                trajectory.write(0.0, *self.frame_fields(state))
             for frame in range(first, steps + 1):
                 for state, row in stepper.advance(state, frame * h):
                     rows.append(row)
                     if stats_file:
                         stats_file.write(row)
                 if trajectory and (frame % every == 0 or frame == steps):
-                    trajectory.write(state.time, self.gather.gather(state.u))
+                    trajectory.write(state.time, *self.frame_fields(state))
                 if run_dir and frame % checkpoint_every == 0 and frame < steps:
                     save_checkpoint(run_dir.file("checkpoint.npz"), self, state, frame,
                                     len(trajectory.times) if trajectory.rank0 else 0, rows,
@@ -282,14 +309,10 @@ class Simulation:
                 stats_file.close()
             if trajectory:
                 trajectory.close()
-        final = self.gather.gather(state.u)
+        final, energy_density = self.frame_fields(state)
         if run_dir is not None:
-            write_final(run_dir.file("final.vtu"), self.domain, final)
-            if self.scene["output"]["render"] and self.comm.rank == 0:
-                from .render import render_file
-
-                render_file(run_dir.file("final.vtu"), run_dir.file("final.png"),
-                            title=f"{self.scene.name}  t = {state.time:.3f} s")
+            write_final(run_dir.file("final.vtu"), self.domain, final, energy_density)
+            write_scene(run_dir.file("scene.json"), self.scene, self.comm)
         return RunResult(state, rows, run_dir.path if run_dir else None, final)
 
     def timed_step(self, state: State, dt: float) -> tuple[State, dict]:
