@@ -18,6 +18,8 @@
 
 from __future__ import annotations
 
+import math
+
 import subprocess
 
 import numpy as np
@@ -148,6 +150,13 @@ def test_two_region_assembly_matches_reference(tmp_path, d, case):
                  reference.elastic_gradient(*args), ASSEMBLY_RTOL)
     assert_close("elastic Hessian", scipy_matrix(forms[2])[order][:, order],
                  reference.elastic_hessian(*args), ASSEMBLY_RTOL)
+    # the frames' energy density field: each cell's own material
+    density = problem.cell_energy_density(problem.u.x.array.copy())
+    volumes = np.abs(np.linalg.det(points[cells[:, 1:]] - points[cells[:, :1]])) / \
+        math.factorial(d)
+    original = np.asarray(domain.mesh.topology.original_cell_index)[:len(density)]
+    assert_close("cell energy density", volumes[original] @ density,
+                 reference.elastic_energy(*args), ASSEMBLY_RTOL)
     M = scipy_matrix(problem.mass_form)[order][:, order]
     assert_close("mass matrix", M, ref.mass, ASSEMBLY_RTOL)
 
