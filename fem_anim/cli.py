@@ -3,6 +3,8 @@
     fem-anim run [SCENE.toml] [-o OUTDIR] [--set KEY=VALUE ...] [--solver NAME] [--quiet]
                  [PETSc options ...]
     fem-anim solvers
+    fem-anim bench [SCENE.toml] [--sweep KEY=V1,V2,...]... [--repeats N] [--reference KEY=V]...
+                   [-o OUTDIR] | --extremes [--full] | --perf ...
 
 PETSc options (``-snes_*``, ``-ksp_*``, ``-pc_*``, ``-mat_*`` and global ones such as
 ``-log_view``) are split off before argparse sees the arguments and reach the step
@@ -43,6 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--resume", metavar="OUTDIR",
                      help="continue the unfinished run in OUTDIR from its last checkpoint")
     sub.add_parser("solvers", help="list the linear solver presets and their PETSc options")
+    bench = sub.add_parser("bench", add_help=False,
+                           help="trade study (SCENE --sweep KEY=V1,V2 ...; -h for its options), "
+                           "--extremes (stability suite) or --perf (performance bench)")
+    bench.add_argument("bench_args", nargs=argparse.REMAINDER)
     return parser
 
 
@@ -75,19 +81,41 @@ def _run(args, cli_options: dict[str, str]) -> int:
         raise FemAnimError(f"output directory {out} exists and is not a directory")
     from .simulation import Simulation
 
+    from .energy import describe_energy, energy_report, initial_energies, write_summary
+
     _quiet_jit_logging()
     sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
+    initial = initial_energies(sim)
     try:
         result = sim.run(Path(out), quiet=args.quiet, resume=args.resume is not None)
     except ConvergenceError as err:
         raise ConvergenceError(f"{err}; the frames so far and the last checkpoint are kept in "
                                f"{out}/.partial: continue with --resume {out} (e.g. with other "
                                "solver options)") from None
-    if MPI.COMM_WORLD.rank == 0 and not args.quiet:
-        last = result.rows[-1]
-        print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "
-              f"total energy {last['total_energy']:.6g} J; outputs in {result.output_dir}")
+    report = energy_report(result.rows, initial, scene)
+    if MPI.COMM_WORLD.rank == 0:
+        write_summary(result.output_dir / "summary.json", scene, result.rows, report)
+        if not args.quiet or report["damped"]:
+            last = result.rows[-1]
+            print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "
+                  f"total energy {last['total_energy']:.6g} J; outputs in {result.output_dir}")
+            print(f"{scene.name}: {describe_energy(report, scene['time']['integrator'])}")
     return 0
+
+
+def _bench(argv: list[str]) -> int:
+    """``fem-anim bench``: the trade study, or with ``--extremes`` / ``--perf`` another bench."""
+    if "--perf" in argv:
+        from .bench import perf  # written on another branch (issue 9)
+
+        return perf.main([a for a in argv if a != "--perf"])
+    if "--extremes" in argv:
+        from .bench import extremes
+
+        return extremes.main([a for a in argv if a != "--extremes"])
+    from .bench import trade
+
+    return trade.main(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -97,6 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     init_petsc(global_args)
     try:
         args = build_parser().parse_args(app_args)
+        if args.command == "bench":
+            return _bench(args.bench_args)
         if args.command == "solvers":
             from .presets import describe_presets
 
