@@ -124,9 +124,9 @@ def main(argv: list[str] | None = None) -> int:
     app_args, solver_options, global_args = split_petsc_args(argv)
     init_petsc(global_args)
     try:
+        if app_args[:1] == ["bench"]:  # its own parser: argparse's REMAINDER drops --options
+            return _bench(app_args[1:])
         args = build_parser().parse_args(app_args)
-        if args.command == "bench":
-            return _bench(args.bench_args)
         if args.command == "solvers":
             from .presets import describe_presets
 
