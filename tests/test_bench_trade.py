@@ -92,3 +92,26 @@ def test_study_error_falls_with_dt(tiny, tmp_path):
     table = (out / "trade_study.md").read_text()
     on_front = [r["label"] for r in rows if r["pareto"] == "True"]
     assert on_front and all(f"| {r['time.dt']} |" in table for r in rows if r["pareto"] == "True")
+
+
+@pytest.mark.mpi
+@pytest.mark.slow
+def test_study_under_mpi_equals_serial(tiny, tmp_path):
+    import subprocess
+
+    from conftest import clean_environment, fem_anim_command, mpirun_command
+
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    args = ["bench", str(tiny), "--sweep", "time.dt=0.1,0.05", "--sweep", "element.degree=1,2",
+            "--repeats", "1", "-q"]
+    subprocess.run([*mpirun, *fem_anim_command(), *args, "-o", str(tmp_path / "mpi")],
+                   check=True, env=clean_environment(), capture_output=True)
+    assert trade.main([*args[1:], "-o", str(tmp_path / "serial")]) == 0
+    tables = []
+    for name in ("mpi", "serial"):
+        with open(tmp_path / name / "trade_study.csv") as f:
+            tables.append([[float(r[k]) for k in ("error_l2", "error_probe", "energy_drift")]
+                           for r in csv.DictReader(f)])
+    np.testing.assert_allclose(tables[0], tables[1], rtol=1e-6)

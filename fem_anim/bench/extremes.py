@@ -206,8 +206,8 @@ def run_case(case: Case, comm=None) -> Outcome:
     start = time.perf_counter()
     sim = Simulation(scene, comm, {})
     info = {"dofs": sim.problem.V.dofmap.index_map.size_global * sim.problem.d}
-    if comm.rank == 0:
-        info["aspect"] = _aspect_ratio(sim.domain.points, sim.domain.cells)
+    info["aspect"] = comm.bcast(_aspect_ratio(sim.domain.points, sim.domain.cells)
+                                if comm.rank == 0 else None, root=0)
     initial = initial_energies(sim)
     dt = scene["time"]["dt"]
     stepper = AdaptiveStepper(sim, dt, scene["time"])
@@ -237,7 +237,7 @@ def run_case(case: Case, comm=None) -> Outcome:
         checked = abs(change) < 0.05
         info["volume_change"] = change
         detail += f", volume change {100 * change:+.2g} % after the half turn"
-    if "aspect" in info and info["aspect"] >= 10:
+    if info["aspect"] >= 10:
         detail += f", aspect ratio {info['aspect']:.0f}"
     if not bounded or not checked:
         return Outcome("unbounded energy" if not bounded else "fails the physical check",
