@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["pareto_front", "write_csv", "plot_pareto", "pareto_table"]
+__all__ = ["pareto_front", "write_csv", "plot_pareto", "pareto_table", "front_labels", "short"]
 
 
 def pareto_front(cost, error) -> np.ndarray:
@@ -49,9 +49,26 @@ def _fmt(v):
     return f"{v:.6g}" if isinstance(v, float) else v
 
 
+def short(value) -> str:
+    """A value for a label or table: numbers to 3 significant digits (1/60 -> 0.0167)."""
+    try:
+        return f"{float(value):.3g}"
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def front_labels(rows: list[dict], keys: list[str]) -> list[str]:
+    """Labels naming only the swept keys whose values differ between ``rows``."""
+    varying = [k for k in keys if len({str(r.get(k)) for r in rows}) > 1] or keys
+    return [" ".join(f"{k.split('.')[-1]}={short(r.get(k))}" for k in varying) for r in rows]
+
+
 def plot_pareto(path: Path, rows: list[dict], front: np.ndarray, title: str,
-                reference_error: float | None = None) -> None:
-    """Log-log error against wall time per simulated second; the front drawn and labelled."""
+                keys: list[str], reference_error: float | None = None) -> None:
+    """Log-log error against wall time per simulated second; the front drawn and labelled.
+
+    Front points are labelled with the swept values that differ along the front.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -60,15 +77,18 @@ def plot_pareto(path: Path, rows: list[dict], front: np.ndarray, title: str,
     cost = np.array([r["wall_per_sim_s"] for r in rows], float)
     err = np.array([r["error_l2"] for r in rows], float)
     ok = np.isfinite(cost) & np.isfinite(err) & (err > 0)
-    fig, ax = plt.subplots(figsize=(9, 6), dpi=110)
+    fig, ax = plt.subplots(figsize=(10, 6.5), dpi=110)
     ax.scatter(cost[ok & ~front], err[ok & ~front], s=18, c="0.6", label="configuration")
     idx = np.flatnonzero(front & ok)
     idx = idx[np.argsort(cost[idx])]
     ax.step(cost[idx], err[idx], where="post", c="C3", lw=1.2, alpha=0.7)
     ax.scatter(cost[idx], err[idx], s=36, c="C3", zorder=3, label="Pareto front")
-    for j, i in enumerate(idx):
-        ax.annotate(rows[i]["label"], (cost[i], err[i]), fontsize=7, xytext=(6, 4 - 10 * (j % 2)),
+    labels = front_labels([rows[i] for i in idx], keys)
+    for j, (i, label) in enumerate(zip(idx, labels)):
+        ax.annotate(label, (cost[i], err[i]), fontsize=7.5, xytext=(7, 3 - 11 * (j % 2)),
                     textcoords="offset points", color="C3")
+    if ok.any():
+        ax.set_xlim(cost[ok].min() / 1.5, cost[ok].max() * 8.0)  # room for the labels
     if reference_error:
         ax.axhline(reference_error, ls=":", c="0.4", lw=0.8)
     ax.set_xscale("log")
@@ -93,7 +113,7 @@ def pareto_table(rows: list[dict], front: np.ndarray, keys: list[str]) -> str:
     for i in idx:
         r = rows[i]
         cells = [f"{r['error_l2']:.2e}", f"{r['error_probe']:.2e}",
-                 f"{r['wall_per_sim_s']:.3g}", *[str(r.get(k, "")) for k in keys],
+                 f"{r['wall_per_sim_s']:.3g}", *[short(r.get(k, "")) for k in keys],
                  str(r["newton_its"]), f"{100 * r['energy_drift']:+.2g} %"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 from ..errors import SceneError
 from ..scene import Scene, load_scene, parse_override
+from .pareto import short
 
 __all__ = ["Configuration", "Study", "parse_sweep", "split_values", "expand_study"]
 
@@ -134,7 +135,7 @@ def expand_study(path: str | None, base_overrides: list[str], sweeps: list[str],
     configurations = []
     for combo in itertools.product(*[overrides for _, overrides in parsed]):
         values = {item.split("=", 1)[0]: item.split("=", 1)[1] for item in combo}
-        label = " ".join(f"{k.split('.')[-1]}={_short(v)}" for k, v in values.items()) \
+        label = " ".join(f"{k.split('.')[-1]}={short(v)}" for k, v in values.items()) \
             or "base"
         configurations.append(_configuration(path, base_overrides, list(combo), values, label,
                                              duration, interval))
@@ -154,14 +155,6 @@ def expand_study(path: str | None, base_overrides: list[str], sweeps: list[str],
     if reference.skipped:
         raise SceneError(f"--reference: {reference.skipped}")
     return Study(base, configurations, reference, duration, interval, frames)
-
-
-def _short(value: str) -> str:
-    """A value for a label: numbers to 3 significant digits (1/60 -> 0.0167)."""
-    try:
-        return f"{float(value):.3g}"
-    except ValueError:
-        return value
 
 
 def _configuration(path, base_overrides, overrides, values, label, duration,

@@ -173,7 +173,7 @@ def _study(args) -> int:
 
 
 def _write_outputs(out, study, rows, keys, points, probe, ref) -> None:
-    from .pareto import pareto_front, pareto_table, plot_pareto, write_csv
+    from .pareto import pareto_front, pareto_table, plot_pareto, short, write_csv
 
     cost = [r.get("wall_per_sim_s", np.nan) for r in rows]
     err = [r.get("error_l2", np.nan) for r in rows]
@@ -182,10 +182,12 @@ def _write_outputs(out, study, rows, keys, points, probe, ref) -> None:
         r["pareto"] = bool(on)
     write_csv(out / "trade_study.csv", rows, ["label", *keys, *COLUMNS[1:], "pareto"])
     ok = [i for i, r in enumerate(rows) if r["status"] == "ok"]
-    title = (f"{study.base.name}: {len(ok)} configurations, {study.duration:.3g} s simulated; "
-             f"error vs reference ({' '.join(study.reference.overrides)})")
+    reference = " ".join(f"{o.split('=', 1)[0].split('.')[-1]}={short(o.split('=', 1)[1])}"
+                         for o in study.reference.overrides)
+    title = (f"{study.base.name}: {len(ok)} configurations, {study.duration:.3g} s simulated "
+             f"each\nerror against the reference run ({reference})")
     if ok:
-        plot_pareto(out / "trade_study.png", [rows[i] for i in ok], front[ok], title)
+        plot_pareto(out / "trade_study.png", [rows[i] for i in ok], front[ok], title, keys)
     stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     failed = [r for r in rows if r["status"] != "ok"]
     text = [f"# Trade study: {study.base.name}", "",
@@ -199,8 +201,14 @@ def _write_outputs(out, study, rows, keys, points, probe, ref) -> None:
             f"{np.array2string(points[probe], precision=3)}.",
             "", "Pareto-optimal configurations, least accurate first:", "",
             pareto_table(rows, front, keys)]
-    if failed:
-        text += ["Not on the plot:", ""] + [f"- {r['label']}: {r['status']}" for r in failed]
+    reasons: dict[str, list[str]] = {}
+    for r in failed:  # one line per distinct reason (a forbidden combination repeats)
+        reason = r["status"].split(": ", 1)[0] + ": " + r["status"].split(": ")[-1]
+        reasons.setdefault(reason, []).append(r["label"])
+    if reasons:
+        text += ["Not on the plot:", ""] + [f"- {len(labels)} configuration(s) {reason} "
+                                            f"({'; '.join(labels)})"
+                                            for reason, labels in reasons.items()]
     (out / "trade_study.md").write_text("\n".join(text) + "\n")
 
 
