@@ -58,6 +58,7 @@ def test_sweep_values_split_outside_brackets():
     ("element.degree=1,3", "element.degree"),
     ("time.steps=4,8", "time.steps"),
     ("time.dt", "--sweep expects"),
+    ("solver.preset=cholesky,nonesuch", "nonesuch"),
 ])
 def test_bad_sweep_exits_2_with_one_line(tiny, capsys, sweep, needle):
     assert cli_main(["bench", str(tiny), "--sweep", sweep]) == 2

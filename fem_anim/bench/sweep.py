@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 
 from ..errors import SceneError
+from ..presets import preset_options
 from ..scene import Scene, load_scene, parse_override
 from .pareto import short
 
@@ -122,6 +123,10 @@ def expand_study(path: str | None, base_overrides: list[str], sweeps: list[str],
     for _, overrides in parsed:
         for item in overrides:  # each value alone: a bad key or value is the user's error
             scenes[item] = load_scene(path, [*base_overrides, item])
+            try:
+                preset_options(scenes[item]["solver"]["preset"])
+            except KeyError as err:
+                raise SceneError(f"--sweep {item}: {err.args[0]}") from None
     duration = base["time"]["dt"] * base["time"]["steps"]
     dts = [base["time"]["dt"]]
     for key, overrides in parsed:
