@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -100,8 +101,27 @@ def _beam(dim: int, full: bool, size=None, es=None, gravity=True, **sections) ->
     return data
 
 
+#: Expected outcomes that differ between the 2D fast variant and the 3D grid (measured:
+#: README "Stability at the extremes"). Near incompressibility the volumetric term
+#: (lambda = 1.7e8 Pa at nu = 0.4999) dominates the step objective; in 3D, P2 at 0.05 m
+#: stalls: the line search finds no decrease at the round-off level of g, down to min_dt.
+EXPECTED_3D = {"E = 1e+02 Pa": "recovers-by-substepping",
+               "nu = 0.49, P2": "recovers-by-substepping",
+               "nu = 0.4999, P1": "recovers-by-substepping",
+               "nu = 0.4999, P2": "stops-with-message",
+               "spinning body (half a turn in 1 s), neohookean": "converges-bounded"}
+
+
 def cases(full: bool = False) -> list[Case]:
     """The extreme cases: 2D and coarse (CI), or 3D and finer with more values (``--full``)."""
+    out = _cases(full)
+    if full:
+        for case in out:
+            case.expected = EXPECTED_3D.get(case.name, case.expected)
+    return out
+
+
+def _cases(full: bool) -> list[Case]:
     d = 3 if full else 2
     n = 2 if full else 1  # more steps in the full grid
     out = []
@@ -110,8 +130,10 @@ def cases(full: bool = False) -> list[Case]:
                         "converges-bounded", (15 if E <= 1e2 else 6) * n))
     for nu in ([0.45, 0.49, 0.4999] if full else [0.4999]):
         for p in (1, 2):
+            # the floor of adaptive halving at dt/16: a stalled 3D P2 run stops in a minute
             out.append(Case(f"nu = {nu}, P{p}", _beam(
-                d, full, material={"poisson_ratio": nu}, element={"degree": p}),
+                d, full, material={"poisson_ratio": nu}, element={"degree": p},
+                time={"dt": 1.0 / 30.0, "min_dt": 1.0 / 480.0}),
                 "recovers-by-substepping" if p == 2 and nu > 0.49 else "converges-bounded",
                 4 * n))
     for dt in ([1e-5, 1e-3, 1e-1, 1.0] if full else [1e-5, 1.0]):
@@ -321,13 +343,19 @@ def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="fem-anim bench --extremes")
     parser.add_argument("--full", action="store_true", help="the 3D grid (minutes)")
     parser.add_argument("-o", "--output", help="also write the table to this markdown file")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     args, unknown = parser.parse_known_args(argv)
     if unknown:
         _print_error(f"bench --extremes: unrecognized arguments: {' '.join(unknown)}")
         return 2
     _quiet_jit_logging()
     try:
-        results = [(case, run_case(case)) for case in cases(args.full)]
+        results = []
+        for case in cases(args.full):
+            results.append((case, run_case(case)))
+            if MPI.COMM_WORLD.rank == 0 and not args.quiet:
+                print(f"extremes: {case.name}: {results[-1][1].measured} "
+                      f"({results[-1][1].seconds:.1f} s)", file=sys.stderr, flush=True)
         locking = locking_rows(args.full)
     except FemAnimError as err:
         _print_error(str(err))
