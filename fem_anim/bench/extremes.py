@@ -239,10 +239,10 @@ def run_case(case: Case, comm=None) -> Outcome:
             for state, row in stepper.advance(state, frame * dt):
                 rows.append(row)
     except ConvergenceError as err:
-        message = str(err)
-        return Outcome("stops-with-message", message[:160] + ("..." if len(message) > 160
-                                                            else ""),
-                       time.perf_counter() - start, info)
+        message = str(err)  # its start (where) and its end (what to do) fit in a table cell
+        if len(message) > 200:
+            message = f"{message[:110]} ... {message[-85:]}"
+        return Outcome("stops-with-message", message, time.perf_counter() - start, info)
     seconds = time.perf_counter() - start
     report = energy_report(rows, initial, scene)
     retries = sum(r["retries"] for r in rows)
