@@ -26,6 +26,7 @@ The fast variants (2D, coarse, few steps) run in CI; ``--full`` runs the 3D grid
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import math
 import sys
@@ -364,5 +365,10 @@ def main(argv: list[str]) -> int:
     if MPI.COMM_WORLD.rank == 0:
         print(table)
         if args.output:
-            Path(args.output).write_text(table)
+            from .trade import machine_description
+
+            stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+            command = " ".join(["fem-anim bench --extremes", *argv])
+            Path(args.output).write_text(f"Measured {stamp} on {machine_description()}; "
+                                         f"`{command}`.\n\n{table}")
     return 0 if all(out.measured == case.expected for case, out in results) else 1
