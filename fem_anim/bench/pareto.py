@@ -77,18 +77,20 @@ def plot_pareto(path: Path, rows: list[dict], front: np.ndarray, title: str,
     cost = np.array([r["wall_per_sim_s"] for r in rows], float)
     err = np.array([r["error_l2"] for r in rows], float)
     ok = np.isfinite(cost) & np.isfinite(err) & (err > 0)
-    fig, ax = plt.subplots(figsize=(10, 6.5), dpi=110)
+    fig, ax = plt.subplots(figsize=(12, 6.5), dpi=110)
+    fig.subplots_adjust(left=0.085, right=0.63, top=0.9, bottom=0.1)
     ax.scatter(cost[ok & ~front], err[ok & ~front], s=18, c="0.6", label="configuration")
     idx = np.flatnonzero(front & ok)
     idx = idx[np.argsort(cost[idx])]
     ax.step(cost[idx], err[idx], where="post", c="C3", lw=1.2, alpha=0.7)
     ax.scatter(cost[idx], err[idx], s=36, c="C3", zorder=3, label="Pareto front")
     labels = front_labels([rows[i] for i in idx], keys)
-    for j, (i, label) in enumerate(zip(idx, labels)):
-        ax.annotate(label, (cost[i], err[i]), fontsize=7.5, xytext=(7, 3 - 11 * (j % 2)),
-                    textcoords="offset points", color="C3")
-    if ok.any():
-        ax.set_xlim(cost[ok].min() / 1.5, cost[ok].max() * 8.0)  # room for the labels
+    for j, i in enumerate(idx):  # numbers on the plot, the configurations beside it
+        ax.annotate(str(j + 1), (cost[i], err[i]), fontsize=8, xytext=(5, 3),
+                    textcoords="offset points", color="C3", weight="bold")
+    fig.text(0.65, 0.9, "Pareto front (cheapest first)\n" + "\n".join(
+        f"{j + 1:2d}  {label}" for j, label in enumerate(labels)), va="top", fontsize=8,
+        family="monospace", color="C3")
     if reference_error:
         ax.axhline(reference_error, ls=":", c="0.4", lw=0.8)
     ax.set_xscale("log")
@@ -98,7 +100,6 @@ def plot_pareto(path: Path, rows: list[dict], front: np.ndarray, title: str,
     ax.set_title(title, fontsize=10)
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
 
