@@ -4,6 +4,8 @@
                  [PETSc options ...]
     fem-anim render OUTDIR [--set render.KEY=VALUE ...] [--quiet]
     fem-anim solvers
+    fem-anim bench [SCENE.toml] [--sweep KEY=V1,V2,...]... [--repeats N] [--reference KEY=V]...
+                   [-o OUTDIR] | --extremes [--full] | --perf ...
 
 PETSc options (``-snes_*``, ``-ksp_*``, ``-pc_*``, ``-mat_*`` and global ones such as
 ``-log_view``) are split off before argparse sees the arguments and reach the step
@@ -49,6 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar="render.KEY=VALUE", help="override a [render] key")
     render.add_argument("-q", "--quiet", action="store_true", help="print nothing")
     sub.add_parser("solvers", help="list the linear solver presets and their PETSc options")
+    bench = sub.add_parser("bench", add_help=False,
+                           help="trade study (SCENE --sweep KEY=V1,V2 ...; -h for its options), "
+                           "--extremes (stability suite) or --perf (performance bench)")
+    bench.add_argument("bench_args", nargs=argparse.REMAINDER)
     return parser
 
 
@@ -81,18 +87,25 @@ def _run(args, cli_options: dict[str, str]) -> int:
         raise FemAnimError(f"output directory {out} exists and is not a directory")
     from .simulation import Simulation
 
+    from .energy import describe_energy, energy_report, initial_energies, write_summary
+
     _quiet_jit_logging()
     sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
+    initial = initial_energies(sim)
     try:
         result = sim.run(Path(out), quiet=args.quiet, resume=args.resume is not None)
     except ConvergenceError as err:
         raise ConvergenceError(f"{err}; the frames so far and the last checkpoint are kept in "
                                f"{out}/.partial: continue with --resume {out} (e.g. with other "
                                "solver options)") from None
-    if MPI.COMM_WORLD.rank == 0 and not args.quiet:
-        last = result.rows[-1]
-        print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "
-              f"total energy {last['total_energy']:.6g} J; outputs in {result.output_dir}")
+    report = energy_report(result.rows, initial, scene)
+    if MPI.COMM_WORLD.rank == 0:
+        write_summary(result.output_dir / "summary.json", scene, result.rows, report)
+        if not args.quiet or report["damped"]:
+            last = result.rows[-1]
+            print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "
+                  f"total energy {last['total_energy']:.6g} J; outputs in {result.output_dir}")
+            print(f"{scene.name}: {describe_energy(report, scene['time']['integrator'])}")
     return 0
 
 
@@ -120,12 +133,29 @@ def _render(args) -> int:
     return 0
 
 
+def _bench(argv: list[str]) -> int:
+    """``fem-anim bench``: the trade study, or with ``--extremes`` / ``--perf`` another bench."""
+    if "--perf" in argv:
+        from .bench import perf  # written on another branch (issue 9)
+
+        return perf.main([a for a in argv if a != "--perf"])
+    if "--extremes" in argv:
+        from .bench import extremes
+
+        return extremes.main([a for a in argv if a != "--extremes"])
+    from .bench import trade
+
+    return trade.main(argv)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``fem-anim``; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     app_args, solver_options, global_args = split_petsc_args(argv)
     init_petsc(global_args)
     try:
+        if app_args[:1] == ["bench"]:  # its own parser: argparse's REMAINDER drops --options
+            return _bench(app_args[1:])
         args = build_parser().parse_args(app_args)
         if args.command == "solvers":
             from .presets import describe_presets

@@ -1,0 +1,374 @@
+"""Stability at the extremes: what each hard scene is expected to do, and what it does.
+
+    fem-anim bench --extremes [--full] [-o TABLE.md]
+
+Each :class:`Case` is a scene pushed to an extreme (Young's modulus 1e2 to 1e9 Pa,
+Poisson ratio up to 0.4999, dt from 1e-5 to 1 s, a spinning body, a stretched and a
+fully compressed bar, elements of aspect ratio 50 and more, a press that inverts
+elements in one step) with its expected outcome:
+
+- ``converges-bounded``: every step converges at once and the energy stays bounded
+  (for a conservative scene |E(t) - E_0| within half the exchanged energy,
+  :mod:`fem_anim.energy`; a case may add its own physical check);
+- ``recovers-by-substepping``: some steps fail, the adaptive stepper halves dt and the
+  run completes (:class:`fem_anim.simulation.AdaptiveStepper`);
+- ``stops-with-message``: the run stops with a :class:`~fem_anim.errors.ConvergenceError`
+  that says what to change.
+
+A spinning body is checked for rotation invariance (the volume after half a turn): the
+linear material, which is not rotation invariant (seed eq. 36), is expected to fail it.
+
+:func:`run_case` measures the outcome; :func:`locking_rows` measures what volumetric
+locking does to P1 against P2 at nu = 0.4999 (quasi-static tip deflection under gravity).
+The fast variants (2D, coarse, few steps) run in CI; ``--full`` runs the 3D grid.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConvergenceError, FemAnimError
+from ..scene import load_scene
+
+__all__ = ["Case", "Outcome", "cases", "run_case", "locking_rows", "format_table", "main",
+           "scene_text", "OUTCOMES"]
+
+OUTCOMES = ("converges-bounded", "recovers-by-substepping", "stops-with-message")
+
+
+@dataclass
+class Case:
+    """One extreme scene: name, the scene's keys, expected outcome, optional check."""
+
+    name: str
+    keys: dict
+    expected: str
+    steps: int
+    check: str = ""  # "rigid": a rotation keeps the volume (a spinning body)
+
+
+@dataclass
+class Outcome:
+    """What a case did."""
+
+    measured: str
+    detail: str
+    seconds: float
+    info: dict = field(default_factory=dict)
+
+
+def scene_text(data: dict) -> str:
+    """A scene dictionary as TOML (numbers, strings, booleans, lists of numbers)."""
+    def value(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        return json.dumps(v) if isinstance(v, (str, list)) else repr(float(v)) \
+            if isinstance(v, float) else str(v)
+
+    lines = [f"name = {json.dumps(data.get('name', 'extreme'))}"]
+    for section, table in data.items():
+        if section == "name":
+            continue
+        for entry in (table if isinstance(table, list) else [table]):
+            lines.append(f"[[{section}]]" if isinstance(table, list) else f"[{section}]")
+            lines += [f"{k} = {value(v)}" for k, v in entry.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _beam(dim: int, full: bool, size=None, es=None, gravity=True, **sections) -> dict:
+    """A cantilever (pinned at x = 0) of 1 x 0.2 (x 0.2) m, neo-Hookean, E = 1e5 Pa."""
+    size = size or ([1.0, 0.2, 0.2][:dim])
+    data = {"name": "extreme",
+            "mesh": {"dim": dim, "size": size, "element_size": es or (0.05 if full else 0.1)},
+            "material": {"youngs_modulus": 1.0e5, "poisson_ratio": 0.3},
+            "time": {"dt": 1.0 / 30.0},
+            "pin": [{"name": "wall", "min": [-1e-6] + [-10.0] * (dim - 1),
+                     "max": [1e-6] + [10.0] * (dim - 1)}],
+            "output": {"render": False}}
+    if gravity:
+        data["gravity"] = {"acceleration": [0.0] * (dim - 1) + [-9.81]}
+    for section, table in sections.items():
+        data[section] = data.get(section, {}) | table if isinstance(table, dict) else table
+    return data
+
+
+#: Expected outcomes that differ between the 2D fast variant and the 3D grid (measured:
+#: README "Stability at the extremes"). Near incompressibility the volumetric term
+#: (lambda = 1.7e8 Pa at nu = 0.4999) dominates the step objective; in 3D, P2 at 0.05 m
+#: stalls: the line search finds no decrease at the round-off level of g, down to min_dt.
+EXPECTED_3D = {"E = 1e+02 Pa": "recovers-by-substepping",
+               "nu = 0.49, P2": "recovers-by-substepping",
+               "nu = 0.4999, P1": "recovers-by-substepping",
+               "nu = 0.4999, P2": "stops-with-message",
+               "spinning body (half a turn in 1 s), neohookean": "converges-bounded"}
+
+
+def cases(full: bool = False) -> list[Case]:
+    """The extreme cases: 2D and coarse (CI), or 3D and finer with more values (``--full``)."""
+    out = _cases(full)
+    if full:
+        for case in out:
+            case.expected = EXPECTED_3D.get(case.name, case.expected)
+    return out
+
+
+def _cases(full: bool) -> list[Case]:
+    d = 3 if full else 2
+    n = 2 if full else 1  # more steps in the full grid
+    out = []
+    for E in ([1e2, 1e4, 1e6, 1e9] if full else [1e2, 1e9]):
+        out.append(Case(f"E = {E:.0e} Pa", _beam(d, full, material={"youngs_modulus": E}),
+                        "converges-bounded", (15 if E <= 1e2 else 6) * n))
+    for nu in ([0.45, 0.49, 0.4999] if full else [0.4999]):
+        for p in (1, 2):
+            # the floor of adaptive halving at dt/16: a stalled 3D P2 run stops in a minute
+            out.append(Case(f"nu = {nu}, P{p}", _beam(
+                d, full, material={"poisson_ratio": nu}, element={"degree": p},
+                time={"dt": 1.0 / 30.0, "min_dt": 1.0 / 480.0}),
+                "recovers-by-substepping" if p == 2 and nu > 0.49 else "converges-bounded",
+                4 * n))
+    for dt in ([1e-5, 1e-3, 1e-1, 1.0] if full else [1e-5, 1.0]):
+        out.append(Case(f"dt = {dt:g} s", _beam(d, full, time={"dt": dt}),
+                        "converges-bounded", 3 * n))
+    axis = {"axis": [0.0, 0.0, 1.0]} if d == 3 else {}
+    centre = [0.5, 0.1, 0.1][:d]
+    hub = {"name": "hub", "min": [0.4] + [0.0] * (d - 1), "max": [0.6] + [0.2] * (d - 1),
+           "angular_velocity": math.pi, "center": centre, **axis}
+    for model, expected in (("neohookean", "recovers-by-substepping"),
+                            ("linear", "fails the physical check")):
+        out.append(Case(f"spinning body (half a turn in 1 s), {model}", _beam(
+            d, full, gravity=False, pin=[hub], material={"youngs_modulus": 1e7, "model": model},
+            time={"dt": 1.0 / 30.0}), expected, 30, check="rigid"))
+    right = {"name": "end", "min": [1.0 - 1e-6] + [-10.0] * (d - 1),
+             "max": [1.0 + 1e-6] + [10.0] * (d - 1)}
+    wall = _beam(d, full)["pin"][0]
+    out.append(Case("stretched to 3x length", _beam(
+        d, full, gravity=False, time={"dt": 0.1},
+        pin=[wall, right | {"velocity": [2.0] + [0.0] * (d - 1), "until": 1.0}]),
+        "converges-bounded", 10))
+    floor = {"name": "floor", "min": [-10.0] * (d - 1) + [-1e-6],
+             "max": [10.0] * (d - 1) + [1e-6]}
+    press = {"name": "press", "min": [-10.0] * (d - 1) + [0.2 - 1e-6],
+             "max": [10.0] * (d - 1) + [0.2 + 1e-6]}
+    out.append(Case("crushed to zero thickness", _beam(
+        d, full, gravity=False, time={"dt": 0.1},
+        pin=[floor, press | {"velocity": [0.0] * (d - 1) + [-0.2], "until": 1.0}]),
+        "stops-with-message", 10))
+    out.append(Case("press inverts elements in one step", _beam(
+        d, full, gravity=False, time={"dt": 0.1},
+        pin=[wall, right | {"velocity": [-4.0] + [0.0] * (d - 1), "until": 0.1}]),
+        "recovers-by-substepping", 3))
+    thin = [2.0, 0.02, 0.02][:d]
+    out.append(Case("thin elements (aspect >= 50)", _beam(
+        d, full, size=thin, es=1.0, material={"youngs_modulus": 1e8}, time={"dt": 0.01}),
+        "converges-bounded", 5 * n))
+    return out
+
+
+def _aspect_ratio(points: np.ndarray, cells: np.ndarray) -> float:
+    """Largest (longest edge / smallest height) over the cells (vectorised)."""
+    x = points[cells]
+    d = cells.shape[1] - 1
+    edges = [x[:, j] - x[:, i] for i in range(d + 1) for j in range(i + 1, d + 1)]
+    longest = np.max([np.linalg.norm(e, axis=1) for e in edges], axis=0)
+    jac = np.stack([x[:, i + 1] - x[:, 0] for i in range(d)], axis=1)
+    measure = np.abs(np.linalg.det(jac)) / math.factorial(d)
+    faces = [np.delete(x, i, axis=1) for i in range(d + 1)]
+    if d == 2:
+        face_size = [np.linalg.norm(f[:, 1] - f[:, 0], axis=1) for f in faces]
+    else:
+        face_size = [0.5 * np.linalg.norm(np.cross(f[:, 1] - f[:, 0], f[:, 2] - f[:, 0]),
+                                           axis=1) for f in faces]
+    height = d * measure / np.max(face_size, axis=0)
+    return float(np.max(longest / height))
+
+
+def _load(data: dict):
+    """Validate a scene dictionary exactly as a file (each rank reads its own copy)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "case.toml"
+        path.write_text(scene_text(data))
+        return load_scene(path)
+
+
+def _volume_change(sim, state) -> float | None:
+    """Relative volume change of the deformed mesh (collective gather; rank 0 computes)."""
+    u = sim.gather.gather(state.u)
+    if sim.comm.rank != 0:
+        return None
+    x, cells = sim.domain.points, sim.domain.cells
+    d = cells.shape[1] - 1
+
+    def volume(p):
+        jac = np.stack([p[cells[:, i + 1]] - p[cells[:, 0]] for i in range(d)], axis=1)
+        return np.sum(np.linalg.det(jac)) / math.factorial(d)
+
+    return float(volume(x + u) / volume(x) - 1.0)
+
+
+def run_case(case: Case, comm=None) -> Outcome:
+    """Run a case to its end or its error and classify what happened."""
+    from mpi4py import MPI
+
+    from ..energy import energy_report, initial_energies
+    from ..simulation import AdaptiveStepper, Simulation
+
+    comm = comm or MPI.COMM_WORLD
+    data = case.keys | {"time": case.keys["time"] | {"steps": case.steps}}
+    scene = _load(data)
+    start = time.perf_counter()
+    sim = Simulation(scene, comm, {})
+    info = {"dofs": sim.problem.V.dofmap.index_map.size_global * sim.problem.d}
+    info["aspect"] = comm.bcast(_aspect_ratio(sim.domain.points, sim.domain.cells)
+                                if comm.rank == 0 else None, root=0)
+    initial = initial_energies(sim)
+    dt = scene["time"]["dt"]
+    stepper = AdaptiveStepper(sim, dt, scene["time"])
+    state, rows = sim.initial_state(), []
+    try:
+        for frame in range(1, case.steps + 1):
+            for state, row in stepper.advance(state, frame * dt):
+                rows.append(row)
+    except ConvergenceError as err:
+        message = str(err)  # its start (where) and its end (what to do) fit in a table cell
+        if len(message) > 200:
+            message = f"{message[:110]} ... {message[-85:]}"
+        return Outcome("stops-with-message", message, time.perf_counter() - start, info)
+    seconds = time.perf_counter() - start
+    report = energy_report(rows, initial, scene)
+    retries = sum(r["retries"] for r in rows)
+    info |= {"retries": retries, "newton_its": sum(r["newton_its"] for r in rows),
+             "drift": report["drift"], "excursion": report["max_excursion"]}
+    detail = f"{len(rows)} steps, {retries} retries, {info['newton_its']} Newton its"
+    bounded = checked = all(math.isfinite(r["total_energy"]) for r in rows)
+    if report["conservative"]:  # no growth beyond half the exchanged energy (loss is damping)
+        e0, scale = report["initial_energy"], report["exchanged_energy"]
+        bounded &= max(r["total_energy"] for r in rows) - e0 <= 0.5 * scale
+        detail += f", energy drift {100 * report['drift']:+.2g} %"
+    if case.check == "rigid":  # rotation invariance: a turn does not inflate the body
+        change = comm.bcast(_volume_change(sim, state), root=0)
+        checked = abs(change) < 0.05
+        info["volume_change"] = change
+        detail += f", volume change {100 * change:+.2g} % after the half turn"
+    if info["aspect"] >= 10:
+        detail += f", aspect ratio {info['aspect']:.0f}"
+    if not bounded or not checked:
+        return Outcome("unbounded energy" if not bounded else "fails the physical check",
+                       detail, seconds, info)
+    return Outcome("recovers-by-substepping" if retries else "converges-bounded", detail,
+                   seconds, info)
+
+
+def locking_rows(full: bool = False, comm=None) -> list[dict]:
+    """Volumetric locking: quasi-static tip deflection of P1 and P2 against a fine P2 run.
+
+    A cantilever (E = 1e7 Pa, so the deflection is small) under gravity, brought to rest
+    by implicit Euler with dt = 1 s (each step damps the first mode by 1 / (1 + (w h)^2),
+    w ~ 20 rad/s). Near incompressibility P1 simplices lock: the discrete displacements
+    must be nearly divergence-free on every element, which P1 tetrahedra/triangles can
+    hardly satisfy, so the beam comes out far too stiff; P2 does not lock this way. The
+    reference is P2 on a mesh twice as fine; Euler-Bernoulli gives
+    w = 3 rho g L^4 / (2 E' h^2) (E' = E / (1 - nu^2) in plane strain) for scale.
+    """
+    from mpi4py import MPI
+
+    from ..simulation import AdaptiveStepper, Simulation
+    from .measure import PointSampler
+
+    comm = comm or MPI.COMM_WORLD
+    d = 3 if full else 2
+    es = 0.1  # the fine P2 reference at 0.05: 3D P2 at 0.025 would be 8e4 dofs
+    tip = np.array([[1.0, 0.1, 0.1][:d]])
+    rows = []
+    for nu in (0.3, 0.4999):
+        deflection = {}
+        for label, degree, size in (("P1", 1, es), ("P2", 2, es), ("fine P2", 2, es / 2)):
+            data = _beam(d, full, es=size, material={"youngs_modulus": 1e7, "poisson_ratio": nu},
+                         element={"degree": degree},
+                         time={"dt": 1.0, "steps": 3, "integrator": "implicit_euler"})
+            scene = _load(data)
+            sim = Simulation(scene, comm, {})
+            stepper = AdaptiveStepper(sim, 1.0, scene["time"])
+            state = sim.initial_state()
+            for frame in (1, 2, 3):
+                for state, _ in stepper.advance(state, float(frame)):
+                    pass
+            sim.problem.u.x.array[:] = state.u
+            deflection[label] = -PointSampler(sim.domain.mesh, tip).sample(sim.problem.u)[0, -1]
+        e_eff = 1e7 / (1 - nu ** 2) if d == 2 else 1e7
+        beam_theory = 3 * 1000.0 * 9.81 / (2 * e_eff * 0.2 ** 2)
+        for label in ("P1", "P2"):
+            rows.append({"nu": nu, "element": label, "deflection": deflection[label],
+                         "reference": deflection["fine P2"], "beam_theory": beam_theory,
+                         "ratio": deflection[label] / deflection["fine P2"]})
+    return rows
+
+
+def format_table(results: list[tuple[Case, Outcome]], locking: list[dict], full: bool) -> str:
+    """The markdown tables: expected against measured outcome, and the locking study."""
+    lines = [f"Stability at the extremes ({'full 3D grid' if full else 'fast 2D variants'})",
+             "", "| case | expected | measured | | details | s |", "|---|---|---|---|---|---|"]
+    for case, out in results:
+        mark = "ok" if out.measured == case.expected else "**differs**"
+        lines.append(f"| {case.name} | {case.expected} | {out.measured} | {mark} | "
+                     f"{out.detail.replace('|', '/')} | {out.seconds:.1f} |")
+    lines += ["", "Locking: quasi-static tip deflection under gravity (E = 1e7 Pa), "
+              "against P2 on a mesh twice as fine", "",
+              "| nu | element | deflection (m) | fine P2 (m) | beam theory (m) | ratio |",
+              "|---|---|---|---|---|---|"]
+    for r in locking:
+        lines.append(f"| {r['nu']} | {r['element']} | {r['deflection']:.4g} | "
+                     f"{r['reference']:.4g} | {r['beam_theory']:.4g} | {r['ratio']:.3f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str]) -> int:
+    """``fem-anim bench --extremes [--full] [-o FILE.md]``: run, print (and write) the table.
+
+    Returns 0 when every case did what it is expected to do, 1 otherwise, 2 on bad input.
+    """
+    from mpi4py import MPI
+
+    from ..cli import _print_error, _quiet_jit_logging
+
+    parser = argparse.ArgumentParser(prog="fem-anim bench --extremes")
+    parser.add_argument("--full", action="store_true", help="the 3D grid (minutes)")
+    parser.add_argument("-o", "--output", help="also write the table to this markdown file")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        _print_error(f"bench --extremes: unrecognized arguments: {' '.join(unknown)}")
+        return 2
+    _quiet_jit_logging()
+    try:
+        results = []
+        for case in cases(args.full):
+            results.append((case, run_case(case)))
+            if MPI.COMM_WORLD.rank == 0 and not args.quiet:
+                print(f"extremes: {case.name}: {results[-1][1].measured} "
+                      f"({results[-1][1].seconds:.1f} s)", file=sys.stderr, flush=True)
+        locking = locking_rows(args.full)
+    except FemAnimError as err:
+        _print_error(str(err))
+        return 2
+    table = format_table(results, locking, args.full)
+    if MPI.COMM_WORLD.rank == 0:
+        print(table)
+        if args.output:
+            from .trade import machine_description
+
+            stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+            command = " ".join(["fem-anim bench --extremes", *argv])
+            Path(args.output).write_text(f"Measured {stamp} on {machine_description()}; "
+                                         f"`{command}`.\n\n{table}")
+    return 0 if all(out.measured == case.expected for case, out in results) else 1
