@@ -42,10 +42,15 @@ from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh
 
-__all__ = ["EnergyProblem", "PinMotion", "QuadratureData", "compile_forms",
+__all__ = ["EVENTS", "EnergyProblem", "PinMotion", "QuadratureData", "compile_forms",
            "default_quadrature_degree"]
 
 JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-march=native"]}
+
+#: PETSc log events of the assembly callbacks (PETSc's own timers: ``-log_view`` lists them,
+#: and :mod:`fem_anim.bench.perf` reads them to split a step's time).
+EVENTS = {name: PETSc.Log.Event(f"FemAnim{name.capitalize()}")
+          for name in ("objective", "residual", "jacobian", "filter")}
 
 
 def compile_forms(forms: dict[str, ufl.Form]) -> dict[str, fem.FormMetaClass]:
@@ -363,17 +368,20 @@ class EnergyProblem:
         line search never accepts it (the energy is infinite there, not NaN).
         """
         start = time.perf_counter()
+        EVENTS["objective"].begin()
         self.set_state(x)
         if self.filter_inversion and not self.min_det_F() > 0.0:
             value = np.inf
         else:
             value = self.assemble_scalar(self.objective_form)
+        EVENTS["objective"].end()
         self.assembly_s += time.perf_counter() - start
         return value
 
     def residual(self, snes, x: PETSc.Vec, b: PETSc.Vec) -> None:
         """grad g(x), with pinned rows replaced by x - u_bc."""
         start = time.perf_counter()
+        EVENTS["residual"].begin()
         self.set_state(x)
         with b.localForm() as b_local:
             b_local.set(0.0)
@@ -381,6 +389,7 @@ class EnergyProblem:
         fem_petsc.apply_lifting(b, [self.jacobian_form], bcs=[self.bcs], x0=[x], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fem_petsc.set_bc(b, self.bcs, x, -1.0)
+        EVENTS["residual"].end()
         self.assembly_s += time.perf_counter() - start
 
     def jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
@@ -389,12 +398,14 @@ class EnergyProblem:
         Line-search trials may have left another state in u, so x is set first.
         """
         start = time.perf_counter()
+        EVENTS["jacobian"].begin()
         self.set_state(x)
         if self.tangent_data is not None:
             self.tangent_data.update()
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.jacobian_form, self.bcs)
         A.assemble()
+        EVENTS["jacobian"].end()
         self.assembly_s += time.perf_counter() - start
 
     def create_matrix(self) -> PETSc.Mat:

@@ -29,6 +29,7 @@ from petsc4py import PETSc
 from .errors import ConvergenceError, FemAnimError
 from .hessian import ShiftStrategy
 from .petsc_options import DEFAULT_PREFIX, options_in_database
+from .problem import EVENTS
 
 __all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "NONLINEAR_METHODS"]
 
@@ -206,6 +207,7 @@ class Minimiser:
         if not self.problem.filter_inversion:
             return False
         trial = x.duplicate()
+        EVENTS["filter"].begin()
         try:
             for halvings in range(MAX_FILTER_HALVINGS):
                 x.copy(trial)
@@ -218,6 +220,7 @@ class Minimiser:
         finally:
             trial.destroy()
             self.problem.set_state(x)
+            EVENTS["filter"].end()
 
     def _jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
         """The problem's Hessian, shifted by c I until it is positive definite if asked.
