@@ -93,7 +93,12 @@ class Minimiser:
         self.stopping = settings.get("stopping", "norm")
         self.decrement_tol = settings.get("decrement_tol", 0.0)
         self.shift = ShiftStrategy() if settings.get("hessian") == "shift" else None
-        self.A = problem.create_matrix()
+        # -mat_type (aij, baij) picks the Hessian's storage; PETSc never reads it for a
+        # matrix the application creates, so it is taken here
+        mat_type = options.get("mat_type") or None
+        if mat_type not in (None, "aij", "baij"):
+            raise FemAnimError(f"mat_type: the Hessian is stored as aij or baij, not {mat_type!r}")
+        self.A = problem.create_matrix(mat_type)
         self.b = problem.create_vector()
         snes = self.snes = PETSc.SNES().create(problem.comm)
         snes.setOptionsPrefix(prefix)
