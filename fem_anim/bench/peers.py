@@ -52,7 +52,8 @@ def peer_python(install: bool = True) -> Path | None:
         return python
     if not install:
         return None
-    steps = [["/usr/bin/python3", "-m", "venv", str(PEER_VENV)], [str(python), "-m", "pip", "install", "-q", "pbatoolkit"], check]
+    steps = [["/usr/bin/python3", "-m", "venv", str(PEER_VENV)],
+             [str(python), "-m", "pip", "install", "-q", "pbatoolkit"], check]
     for cmd in steps:
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:

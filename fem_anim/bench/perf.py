@@ -164,7 +164,7 @@ def _sections(args, petsc, rows, out: Path, log) -> dict:
         extra["blas"] = report.blas_rows(args, petsc, run_config, REFERENCE_BLAS)
     if args.mpi:
         log("MPI: serial against mpirun -n 2 on the largest mesh")
-        extra["mpi"] = report.mpi_rows(args, petsc, run_config, min(args.sizes))
+        extra["mpi"] = report.mpi_rows(args, petsc, run_config, min(args.sizes), rows)
     if args.options:
         from .options import options_table
 
