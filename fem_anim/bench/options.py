@@ -35,6 +35,7 @@ OPTION_CASES = (
     ("cg-icc, lag preconditioner 2", "cg-icc",
      {"snes_lag_preconditioner": "2", "snes_lag_preconditioner_persists": ""}, [],
      "cg-icc (exact)"),
+    ("cg-icc, baij", "cg-icc", {"mat_type": "baij"}, [], "cg-icc (exact)"),
     ("cg-jacobi (aij)", "cg-jacobi", {}, [], None),
     ("cg-jacobi, baij", "cg-jacobi", {"mat_type": "baij"}, [], "cg-jacobi (aij)"),
     ("P2 cholesky, quadrature 2", "cholesky", {}, ["element.degree=2",

@@ -144,11 +144,13 @@ def blas_rows(args, petsc, run_config, reference_dirs) -> str:
             "libblas.so.3/liblapack.so.3 first).")
 
 
-def mpi_rows(args, petsc, run_config, h: float, serial_rows: list[dict]) -> str:
-    """mpirun -n 2 against the serial sweep's row on one mesh, per preset (parallel variant)."""
+def mpi_rows(args, petsc, run_config, serial_rows: list[dict]) -> str:
+    """mpirun -n 2 against the serial sweep on each preset's largest mesh (parallel variant)."""
     body = []
     for preset in args.presets.split(","):
-        serial = next(r for r in serial_rows if r["preset"] == preset and r["element_size"] == h)
+        serial = min((r for r in serial_rows if r["preset"] == preset),
+                     key=lambda r: r["element_size"])
+        h = serial["element_size"]
         r = run_config(args.scene, [*args.overrides, f"mesh.element_size={h}"], preset,
                        args.steps, petsc, ranks=2)
         for ranks, m in ((1, serial), (2, r["mean"])):
