@@ -69,7 +69,8 @@ def hard_run(scene_path, overrides, out: Path, log=print, h: float = HARD_ELEMEN
     body = []
     for label, sets, petsc in CONFIGS:
         r = run_case(scene_path, [*overrides, f"mesh.element_size={h}", *sets], petsc, preset)
-        outcome = "finished" if r["finished"] else f"stopped: {r['error']}"
+        reason = r["error"].split("; the frames so far")[0]  # without the temporary path
+        outcome = "finished" if r["finished"] else f"stopped: {reason}"
         log(f"  {label}: {outcome} ({r['steps']} steps to t = {r['t_end']:.3f} s, "
             f"{r['newton_its']} Newton its, {r['retries']} retries, {r['wall']:.0f} s)")
         body.append([label, "yes" if r["finished"] else "no", f"{r['t_end']:.3f}",
