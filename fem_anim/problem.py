@@ -49,10 +49,15 @@ from .errors import SceneError
 from .mesh import SimplexMesh
 from .region import assign_materials
 
-__all__ = ["EnergyProblem", "PinMotion", "QuadratureData", "compile_forms",
+__all__ = ["EVENTS", "EnergyProblem", "PinMotion", "QuadratureData", "compile_forms",
            "default_quadrature_degree"]
 
 JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-march=native"]}
+
+#: PETSc log events of the assembly callbacks (PETSc's own timers: ``-log_view`` lists them,
+#: and :mod:`fem_anim.bench.perf` reads them to split a step's time).
+EVENTS = {name: PETSc.Log.Event(f"FemAnim{name.capitalize()}")
+          for name in ("objective", "residual", "jacobian", "filter", "energies")}
 
 
 def compile_forms(forms: dict[str, ufl.Form]) -> dict[str, fem.FormMetaClass]:
@@ -217,6 +222,7 @@ class EnergyProblem:
 
         self.quadrature_data: list[QuadratureData] = []
         self._extra: dict = {}  # displacement Function -> the material's quadrature data
+        self._quadrature_inputs: list[np.ndarray] | None = None  # their arrays at the refresh
         elastic_u = self._elastic_energy(self.u)
         gravity_u = None
         self.g = None
@@ -459,8 +465,25 @@ class EnergyProblem:
         u = compat.petsc_vec(self.u)
         x.copy(u)
         u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        self.update_quadrature_data()
+
+    def update_quadrature_data(self) -> None:
+        """Refresh the material's quadrature data, unless its inputs are unchanged.
+
+        The data (e.g. corotated's tr sqrt(C), a batched SVD) depends only on the
+        displacement Functions it is computed from; when their local arrays (with ghosts)
+        equal those of the last refresh, the data is current. Rank-local like the refresh
+        itself: no communication, so ranks may decide differently.
+        """
+        if not self.quadrature_data:
+            return
+        arrays = [f.x.array for f in self._extra]
+        if self._quadrature_inputs is not None and all(
+                np.array_equal(a, b) for a, b in zip(arrays, self._quadrature_inputs)):
+            return
         for data in self.quadrature_data:
             data.update()
+        self._quadrature_inputs = [a.copy() for a in arrays]
 
     def assemble_scalar(self, form) -> float:
         """A scalar form summed over all ranks."""
@@ -482,6 +505,7 @@ class EnergyProblem:
         state where a contact point touches or crosses an obstacle (:mod:`fem_anim.contact`).
         """
         start = time.perf_counter()
+        EVENTS["objective"].begin()
         self.set_state(x)
         if self.filter_inversion and not self.min_det_F() > 0.0:
             value = np.inf
@@ -489,12 +513,14 @@ class EnergyProblem:
             value = np.inf  # a contact point on or through an obstacle: the barrier is +inf
         else:
             value = self.assemble_scalar(self.objective_form)
+        EVENTS["objective"].end()
         self.assembly_s += time.perf_counter() - start
         return value
 
     def residual(self, snes, x: PETSc.Vec, b: PETSc.Vec) -> None:
         """grad g(x), with pinned rows replaced by x - u_bc."""
         start = time.perf_counter()
+        EVENTS["residual"].begin()
         self.set_state(x)
         with b.localForm() as b_local:
             b_local.set(0.0)
@@ -502,6 +528,7 @@ class EnergyProblem:
         fem_petsc.apply_lifting(b, [self.jacobian_form], bcs=[self.bcs], x0=[x], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fem_petsc.set_bc(b, self.bcs, x, -1.0)
+        EVENTS["residual"].end()
         self.assembly_s += time.perf_counter() - start
 
     def jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
@@ -510,21 +537,26 @@ class EnergyProblem:
         Line-search trials may have left another state in u, so x is set first.
         """
         start = time.perf_counter()
+        EVENTS["jacobian"].begin()
         self.set_state(x)
         if self.tangent_data is not None:
             self.tangent_data.update()
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.jacobian_form, self.bcs)
         A.assemble()
+        EVENTS["jacobian"].end()
         self.assembly_s += time.perf_counter() - start
 
-    def create_matrix(self) -> PETSc.Mat:
+    def create_matrix(self, mat_type: str | None = None) -> PETSc.Mat:
         """The Jacobian matrix, sparsity and preallocation built once.
 
         It carries the rigid-body modes as near-nullspace, which algebraic multigrid
-        (``cg-gamg``) needs for elasticity and every other solver ignores.
+        (``cg-gamg``) needs for elasticity and every other solver ignores. ``mat_type``
+        ``"baij"`` stores d x d blocks: assembly inserts a block per vertex pair (about 3x
+        faster here) but PETSc's and MUMPS's Cholesky and GAMG reject it (LU, ILU, ICC,
+        Jacobi, SOR and hypre accept it).
         """
-        A = fem_petsc.create_matrix(self.jacobian_form)
+        A = fem_petsc.create_matrix(self.jacobian_form, mat_type)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         A.setNearNullSpace(self.rigid_body_modes())
         return A
@@ -558,9 +590,10 @@ class EnergyProblem:
 
     def energies(self) -> dict[str, float]:
         """Kinetic, elastic and gravitational energy of the current (u, v) state."""
-        for data in self.quadrature_data:
-            data.update()
+        EVENTS["energies"].begin()
+        self.update_quadrature_data()
         values = {name: self.assemble_scalar(form) for name, form in self.energy_forms.items()}
+        EVENTS["energies"].end()
         values.setdefault("gravity", 0.0)
         values.setdefault("contact", 0.0)
         values["total_energy"] = values["kinetic"] + values["elastic"] + values["gravity"] + \

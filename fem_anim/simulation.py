@@ -123,8 +123,7 @@ class Simulation:
         p = self.problem
         v = np.zeros_like(u) if v is None else v
         p.u.x.array[:] = u
-        for data in p.quadrature_data:
-            data.update()
+        p.update_quadrature_data()
         f = fem_petsc.assemble_vector(p.potential_gradient_form)
         f.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         f.scale(-1.0)

