@@ -57,10 +57,25 @@ def short(value) -> str:
         return str(value)
 
 
+#: Short names of common sweep keys in plot labels (``P2 h=0.1 dt=0.0333 newmark``).
+ABBREVIATIONS = {"time.dt": "dt", "mesh.element_size": "h", "element.degree": "P",
+                 "element.quadrature_degree": "q", "solver.petsc.snes_rtol": "rtol"}
+
+
+def _label_part(key: str, value) -> str:
+    text = short(value)
+    try:
+        float(text)
+    except ValueError:
+        return text  # a word (newmark, lumped, cg-icc) names itself
+    name = ABBREVIATIONS.get(key, key.split(".")[-1])
+    return f"P{text}" if name == "P" else f"{name}={text}"
+
+
 def front_labels(rows: list[dict], keys: list[str]) -> list[str]:
     """Labels naming only the swept keys whose values differ between ``rows``."""
     varying = [k for k in keys if len({str(r.get(k)) for r in rows}) > 1] or keys
-    return [" ".join(f"{k.split('.')[-1]}={short(r.get(k))}" for k in varying) for r in rows]
+    return [" ".join(_label_part(k, r.get(k)) for k in varying) for r in rows]
 
 
 def plot_pareto(path: Path, rows: list[dict], front: np.ndarray, title: str,
