@@ -40,7 +40,7 @@ from fem_anim.simulation import Simulation
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent
 OUT = Path(os.environ.get("FEM_ANIM_DEMO_OUT", "out/demos")) / "jelly_cube"
-overrides = ["mesh.element_size=0.1"] if REDUCED else []
+overrides = ["mesh.element_size=0.1", "output.render=false"] if REDUCED else []
 
 # %% [markdown]
 # ## Run the scene
