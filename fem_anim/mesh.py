@@ -30,6 +30,7 @@ from .errors import MeshError
 __all__ = [
     "SimplexMesh",
     "build_mesh",
+    "cell_volumes",
     "check_cells",
     "check_surface",
     "mesh_from_arrays",
@@ -99,6 +100,11 @@ def _check_simplices(points: np.ndarray, cells: np.ndarray, source: str, what: s
 def _signed_measures(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """``det[X_1 - X_0, ..., X_d - X_0]`` per cell (``d!`` times its signed volume)."""
     return np.linalg.det(points[cells[:, 1:]] - points[cells[:, :1]])
+
+
+def cell_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Signed volume (area in 2D) of each affine simplex ``points[cells]`` (vectorised)."""
+    return _signed_measures(points, cells) / math.factorial(cells.shape[1] - 1)
 
 
 def check_cells(points: np.ndarray, cells: np.ndarray, source: str) -> None:

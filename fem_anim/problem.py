@@ -21,7 +21,6 @@ are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins)
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -46,7 +45,7 @@ from . import compat
 from .contact import ObstacleContact
 from .hessian import project_psd
 from .errors import SceneError
-from .mesh import SimplexMesh
+from .mesh import SimplexMesh, cell_volumes
 from .region import assign_materials
 
 __all__ = ["EVENTS", "EnergyProblem", "PinMotion", "QuadratureData", "compile_forms",
@@ -612,15 +611,13 @@ class EnergyProblem:
             u: Displacement dof values, ghosts included (a :class:`State`'s ``u``).
         """
         self.u.x.array[:] = u
-        for data in self.quadrature_data:
-            data.update()
+        self.update_quadrature_data()
         num_owned = self.domain.mesh.topology.index_map(self.d).size_local
         cell_dofs = self.W0.dofmap.list.array[:num_owned]
-        if self._cell_volumes is None:  # |K| = |det D_m| / d! of the affine simplex
+        if self._cell_volumes is None:
             mesh = self.domain.mesh
-            x = mesh.geometry.x[compat.geometry_dofmap(mesh)[:num_owned], : self.d]
-            Dm = np.swapaxes(x[:, 1:] - x[:, :1], 1, 2)
-            self._cell_volumes = np.abs(np.linalg.det(Dm)) / math.factorial(self.d)
+            self._cell_volumes = np.abs(cell_volumes(
+                mesh.geometry.x[:, : self.d], compat.geometry_dofmap(mesh)[:num_owned]))
         energy = fem_petsc.assemble_vector(self.cell_elastic_form)
         values = energy.array[cell_dofs] / self._cell_volumes
         energy.destroy()

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConvergenceError, FemAnimError
+from ..mesh import cell_volumes
 from ..scene import load_scene
 
 __all__ = ["Case", "Outcome", "cases", "run_case", "locking_rows", "format_table", "main",
@@ -181,8 +182,7 @@ def _aspect_ratio(points: np.ndarray, cells: np.ndarray) -> float:
     d = cells.shape[1] - 1
     edges = [x[:, j] - x[:, i] for i in range(d + 1) for j in range(i + 1, d + 1)]
     longest = np.max([np.linalg.norm(e, axis=1) for e in edges], axis=0)
-    jac = np.stack([x[:, i + 1] - x[:, 0] for i in range(d)], axis=1)
-    measure = np.abs(np.linalg.det(jac)) / math.factorial(d)
+    measure = np.abs(cell_volumes(points, cells))
     faces = [np.delete(x, i, axis=1) for i in range(d + 1)]
     if d == 2:
         face_size = [np.linalg.norm(f[:, 1] - f[:, 0], axis=1) for f in faces]
@@ -207,13 +207,7 @@ def _volume_change(sim, state) -> float | None:
     if sim.comm.rank != 0:
         return None
     x, cells = sim.domain.points, sim.domain.cells
-    d = cells.shape[1] - 1
-
-    def volume(p):
-        jac = np.stack([p[cells[:, i + 1]] - p[cells[:, 0]] for i in range(d)], axis=1)
-        return np.sum(np.linalg.det(jac)) / math.factorial(d)
-
-    return float(volume(x + u) / volume(x) - 1.0)
+    return float(cell_volumes(x + u, cells).sum() / cell_volumes(x, cells).sum() - 1.0)
 
 
 def run_case(case: Case, comm=None) -> Outcome:
