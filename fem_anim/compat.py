@@ -12,6 +12,7 @@ wrapped here, so moving to a newer DOLFINx is a change to this file only:
 ``mesh.geometry.dofmap`` (adjacency)     ``mesh.geometry.dofmap`` (2D array)
 ``Quadrature`` ufl element                basix quadrature element (0.7)
 ``mesh.create_mesh(comm, cells, x, d)``  ``d`` became a basix/ufl element (0.8)
+``geometry.BoundingBoxTree(mesh, d)``    ``geometry.bb_tree(mesh, d)`` (0.7)
 =======================================  ==========================================
 """
 
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 import ufl
-from dolfinx import fem
+from dolfinx import fem, geometry
 from dolfinx import mesh as dmesh
 
 __all__ = [
@@ -28,6 +29,7 @@ __all__ = [
     "petsc_vec",
     "geometry_dofmap",
     "create_mesh",
+    "colliding_cells",
 ]
 
 
@@ -68,3 +70,10 @@ def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: st
     return dmesh.create_mesh(comm, cells, x, domain)
 
 
+
+
+def colliding_cells(mesh, points: np.ndarray):
+    """Local cells containing each of ``points`` (n, 3): an adjacency list point -> cells."""
+    tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
+    candidates = geometry.compute_collisions(tree, points)
+    return geometry.compute_colliding_cells(mesh, candidates, points)

@@ -33,6 +33,7 @@ from petsc4py import PETSc
 
 from fem_anim.forms import contact as contact_forms
 
+from . import compat
 from .errors import SceneError
 
 __all__ = ["ObstacleContact", "KEEP_FRACTION", "contact_quadrature"]
@@ -267,14 +268,7 @@ class ObstacleContact:
 
 
 def _point_in_mesh(mesh, point: np.ndarray) -> bool:
-    """Whether ``point`` lies in a local cell (barycentric coordinates, all cells at once)."""
-    tdim = mesh.topology.dim
-    num_cells = mesh.topology.index_map(tdim).size_local
-    if num_cells == 0:
-        return False
-    nodes = mesh.geometry.dofmap.array.reshape(-1, tdim + 1)[:num_cells]
-    X = mesh.geometry.x[nodes][:, :, :tdim]
-    D = (X[:, 1:] - X[:, :1]).transpose(0, 2, 1)
-    lam = np.linalg.solve(D, (point[:tdim] - X[:, 0])[:, :, None])[:, :, 0]
-    bary = np.hstack([1.0 - lam.sum(axis=1, keepdims=True), lam])
-    return bool(np.any(np.all(bary >= -1e-12, axis=1)))
+    """Whether ``point`` lies in a local cell (DOLFINx's bounding-box tree)."""
+    p3 = np.zeros((1, 3))
+    p3[0, : point.size] = point
+    return compat.colliding_cells(mesh, p3).links(0).size > 0

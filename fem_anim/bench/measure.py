@@ -20,9 +20,9 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from dolfinx import geometry
 from mpi4py import MPI
 
+from .. import compat
 from ..energy import energy_report, initial_energies
 from ..errors import ConvergenceError
 from ..mesh import build_mesh
@@ -39,9 +39,7 @@ class PointSampler:
         n = points.shape[0]
         p3 = np.zeros((n, 3))
         p3[:, : points.shape[1]] = points
-        tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
-        candidates = geometry.compute_collisions(tree, p3)
-        colliding = geometry.compute_colliding_cells(mesh, candidates, p3)
+        colliding = compat.colliding_cells(mesh, p3)
         offsets = colliding.offsets
         found = np.flatnonzero(np.diff(offsets) > 0)
         self.points = p3[found]
