@@ -25,6 +25,7 @@ from dolfinx import mesh as dmesh
 
 __all__ = [
     "vector_space",
+    "cell_space",
     "quadrature_space",
     "petsc_vec",
     "geometry_dofmap",
@@ -36,6 +37,11 @@ __all__ = [
 def vector_space(mesh, degree: int) -> fem.FunctionSpace:
     """Vector-valued continuous Lagrange space of the given degree."""
     return fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+
+
+def cell_space(mesh) -> fem.FunctionSpace:
+    """Piecewise-constant scalars: one value per cell (DG0)."""
+    return fem.FunctionSpace(mesh, ("DG", 0))
 
 
 def quadrature_space(mesh, degree: int, shape: tuple[int, ...] = ()) -> fem.FunctionSpace:

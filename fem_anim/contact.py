@@ -226,10 +226,10 @@ class ObstacleContact:
 
         ``u`` must hold the current iterate x (with ghosts); ``y`` is the search direction.
         """
-        with y.localForm() as y_local, self.direction.vector.localForm() as target:
+        direction = compat.petsc_vec(self.direction)
+        with y.localForm() as y_local, direction.localForm() as target:
             y_local.copy(target)
-        self.direction.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT,
-                                          mode=PETSc.ScatterMode.FORWARD)
+        direction.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         x, y_p = self._evaluate()
         alpha = np.ones(x.shape[0])
         for (ob, geo), d0 in zip(self._distance, self._distances(x)):

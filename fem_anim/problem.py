@@ -210,6 +210,7 @@ class EnergyProblem:
         self.dx_elastic = dx(metadata={"quadrature_degree": self.quadrature_degree})
         #: (material, measure) of each elastic integral: one per model in use
         self.elastic_terms = [(self.material, self.dx_elastic)]
+        self.W0 = compat.cell_space(mesh)  # per-cell data: region parameters, energy density
         if scene.get("region"):
             self._regions()
         self.dx_mass = inertia_forms.mass_measure(dx, degree, mat["mass"] == "lumped")
@@ -300,7 +301,6 @@ class EnergyProblem:
             ufl_forms["contact"] = self.contact.energy
         # per-cell int_K psi dX, for the energy density field of the frames (last: keeps the
         # other forms' JIT keys)
-        self.W0 = fem.FunctionSpace(mesh, ("DG", 0))
         q = ufl.TestFunction(self.W0)
         ufl_forms["cell_elastic"] = sum(self._psi(self.u, material=m) * q * dx
                                         for m, dx in self.elastic_terms)
@@ -330,7 +330,7 @@ class EnergyProblem:
         """
         mesh = self.domain.mesh
         self.material_map = cells = assign_materials(self.scene, self.domain)
-        Q = fem.FunctionSpace(mesh, ("DG", 0))
+        Q = self.W0
         cell_dofs = Q.dofmap.list.array.reshape(-1)[: cells.cell_material.size]
         E, nu = cells.cell_values("youngs_modulus"), cells.cell_values("poisson_ratio")
         fields = dict(zip(("mu", "lmbda"), lame_parameters(E, nu)))
