@@ -4,7 +4,7 @@ Library code raises these; only the command line turns them into a message and
 exit code 2. Every message names the offending key, file or value.
 """
 
-__all__ = ["FemAnimError", "SceneError", "MeshError", "ConvergenceError"]
+__all__ = ["FemAnimError", "SceneError", "MeshError", "ConvergenceError", "show_value"]
 
 
 class FemAnimError(Exception):
@@ -21,3 +21,9 @@ class MeshError(FemAnimError):
 
 class ConvergenceError(FemAnimError):
     """A time step's minimisation did not converge."""
+
+
+def show_value(value: object, limit: int = 200) -> str:
+    """``repr`` of a value for a message, cut short (a scene value may be megabytes)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
