@@ -8,7 +8,7 @@
 #
 # Each step minimises g(x) = 1/2 ||x - y||_M^2 + h^2/4 E(x) (seed eq. 4) with the handles'
 # vertices as Dirichlet values x = c + R(omega t)(X - c) (Rodrigues' formula,
-# `fem_anim.problem.PinMotion`). The demo asserts:
+# `fem_anim.pin.PinMotion`). The demo asserts:
 #
 # * the measured twist of each end face (the angle between X - c and x - c in the y-z
 #   plane, from the written displacement) equals the prescribed -/+ omega min(t, 1 s);

@@ -46,10 +46,11 @@ from .contact import ObstacleContact
 from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh, cell_volumes
+from .pin import PinMotion
+from .quadrature import QuadratureData
 from .region import assign_materials
 
-__all__ = ["EVENTS", "EnergyProblem", "PinMotion", "QuadratureData", "compile_forms",
-           "default_quadrature_degree"]
+__all__ = ["EVENTS", "EnergyProblem", "compile_forms", "default_quadrature_degree"]
 
 JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-march=native"]}
 
@@ -77,97 +78,6 @@ def compile_forms(forms: dict[str, ufl.Form]) -> dict[str, fem.FormMetaClass]:
 def default_quadrature_degree(degree: int) -> int:
     """Quadrature degree of the elastic term: exact for P1 (constant F), 2(k-1) for P_k."""
     return max(1, 2 * (degree - 1))
-
-
-@dataclass
-class PinMotion:
-    """A pin that follows a prescribed rigid path: an animated handle (scene data only).
-
-    The pinned rest points X move to c + R(omega t') (X - c) + v t' with t' = min(t, until),
-    R the rotation by omega t' about ``axis`` through ``center`` (2D: about z).
-    """
-
-    dofs: np.ndarray
-    X: np.ndarray
-    velocity: np.ndarray
-    omega: float
-    axis: np.ndarray
-    center: np.ndarray
-    until: float
-
-    @classmethod
-    def from_scene(cls, pin: dict, dofs: np.ndarray, X: np.ndarray) -> "PinMotion":
-        d = X.shape[1]
-        center = pin["center"] if pin["center"] is not None else \
-            0.5 * (np.asarray(pin["min"]) + np.asarray(pin["max"]))
-        axis = np.asarray(pin["axis"] if pin["axis"] is not None else [0.0, 0.0, 1.0], float)
-        velocity = pin["velocity"] if pin["velocity"] is not None else [0.0] * d
-        return cls(dofs, X, np.asarray(velocity, float), float(pin["angular_velocity"]),
-                   axis / np.linalg.norm(axis), np.asarray(center, float),
-                   np.inf if pin["until"] is None else float(pin["until"]))
-
-    def _rotated(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(r, R(omega t') r) with r = X - c (Rodrigues' rotation formula)."""
-        theta = self.omega * min(t, self.until)
-        r = self.X - self.center
-        if r.shape[1] == 2:
-            c, s = np.cos(theta), np.sin(theta)
-            return r, np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], axis=1)
-        k = self.axis
-        return r, (r * np.cos(theta) + np.cross(k, r) * np.sin(theta)
-                   + np.outer(r @ k, k) * (1.0 - np.cos(theta)))
-
-    def _spin(self, r: np.ndarray) -> np.ndarray:
-        """omega x r (2D: omega about z)."""
-        if r.shape[1] == 2:
-            return self.omega * np.stack([-r[:, 1], r[:, 0]], axis=1)
-        return self.omega * np.cross(self.axis, r)
-
-    def displacement(self, t: float) -> np.ndarray:
-        """Displacement of the pinned dofs at time ``t``."""
-        r, rotated = self._rotated(t)
-        return rotated - r + self.velocity * min(t, self.until)
-
-    def rates(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Velocity and acceleration of the pinned dofs at time ``t`` (zero once stopped).
-
-        v = omega x R r + velocity, a = omega x (omega x R r): the time derivatives of
-        :meth:`displacement` while the handle moves (from ``until`` on, it rests; a step
-        time within round-off of ``until``, such as 10 x 0.005 = 0.049999..., counts as
-        stopped, since the step that ends there is the one in which the handle stops).
-        """
-        if t >= self.until * (1.0 - 1e-12):
-            return np.zeros_like(self.X), np.zeros_like(self.X)
-        _, rotated = self._rotated(t)
-        spin = self._spin(rotated)
-        return spin + self.velocity, self._spin(spin)
-
-
-@dataclass
-class QuadratureData:
-    """Per-quadrature-point data computed in numpy from a compiled UFL expression.
-
-    Holds a quadrature-space Function and a compiled expression (F, or the material
-    tangent) at the points of the elastic quadrature rule; :meth:`update` evaluates it on
-    every local cell (owned and ghost, so no communication is needed) and applies a numpy
-    map in one vectorised call: the extra data of :data:`forms.material.EXTRA_DATA`, or
-    the PSD projection of :func:`fem_anim.hessian.project_psd`.
-    """
-
-    function: fem.Function
-    expression: fem.Expression
-    evaluate: object
-    num_cells: int
-    value_shape: tuple[int, ...]
-
-    def update(self) -> None:
-        cells = np.arange(self.num_cells, dtype=np.int32)
-        values = self.expression.eval(cells).reshape(-1, *self.value_shape)
-        values = self.evaluate(values).reshape(self.num_cells, -1)
-        dofs = self.function.function_space.dofmap.list.array.reshape(self.num_cells, -1)
-        bs = self.function.function_space.dofmap.bs
-        target = self.function.x.array.reshape(-1, bs)
-        target[dofs.ravel()] = values.reshape(-1, bs)
 
 
 @dataclass

@@ -175,7 +175,7 @@ def test_newmark_pins_move_at_their_prescribed_rates(tmp_path):
 
 def test_handle_rates_are_the_derivatives_of_its_path():
     """Central differences of the displacement give the velocity and acceleration."""
-    from fem_anim.problem import PinMotion
+    from fem_anim.pin import PinMotion
 
     rng = np.random.default_rng(1)
     for d in (2, 3):
