@@ -65,11 +65,12 @@ from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
+from scenes import POISSON_RATIO, YOUNGS_MODULUS, beam, make_scene
+from test_reference_comparison import rotation
 
 from fem_anim import reference
 from fem_anim.mesh import mesh_from_arrays
 from fem_anim.problem import EnergyProblem
-from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
@@ -78,44 +79,22 @@ pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
 EPS = np.finfo(float).eps
 #: Tight Newton tolerances, so that the assertions below see the schemes, not the solver.
 NEWTON = {"snes_rtol": "1e-12", "snes_atol": "1e-14"}
-YOUNGS_MODULUS = 1.0e4  # Pa
-POISSON_RATIO = 0.3
-DENSITY = 1000.0  # kg/m^3
 MU, LMBDA = reference.lame_parameters(YOUNGS_MODULUS, POISSON_RATIO)
 
 
 # --- helpers --------------------------------------------------------------------------------------
 
 
-def toml_list(values) -> str:
-    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
-
-
 def write_scene(directory: Path, name: str, d: int, lengths, material: str, *,
                 integrator: str = "newmark", degree: int = 1, mass: str = "consistent",
                 pin: tuple | None = None):
     """A scene for a mesh given as arrays (its ``[mesh]`` is validated but not built)."""
-    text = f"""name = "{name}"
-[mesh]
-dim = {d}
-size = {toml_list(lengths)}
-element_size = {min(lengths)}
-[element]
-degree = {degree}
-[material]
-model = "{material}"
-youngs_modulus = {YOUNGS_MODULUS}
-poisson_ratio = {POISSON_RATIO}
-density = {DENSITY}
-mass = "{mass}"
-[time]
-integrator = "{integrator}"
-"""
-    if pin is not None:
-        text += f"[[pin]]\nmin = {toml_list(pin[0])}\nmax = {toml_list(pin[1])}\n"
-    path = directory / f"{name}.toml"
-    path.write_text(text)
-    return load_scene(path)
+    floats = [float(v) for v in lengths]
+    return make_scene(directory, beam(
+        name, d, mesh={"size": floats, "element_size": min(lengths)}, element={"degree": degree},
+        material={"model": material, "mass": mass}, time={"integrator": integrator},
+        pin=None if pin is None else [{"min": list(map(float, pin[0])),
+                                       "max": list(map(float, pin[1]))}]))
 
 
 def box(divisions, lengths, perturb: float = 0.0, seed: int = 0):
@@ -163,16 +142,6 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if a.shape[1] == 2:
         return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
     return np.cross(a, b)
-
-
-def rotation(d: int, angle: float) -> np.ndarray:
-    """Rotation by ``angle`` (about the axis (1, 2, 3) in 3D)."""
-    if d == 2:
-        c, s = np.cos(angle), np.sin(angle)
-        return np.array([[c, -s], [s, c]])
-    k = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
 # --- 1. momentum of a free spinning body ----------------------------------------------------------

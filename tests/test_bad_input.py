@@ -26,6 +26,7 @@ import pytest
 from conftest import ROOT, clean_environment, fem_anim_command
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from scenes import to_toml
 from test_cli import BAD_INPUT
 
 from fem_anim.cli import main
@@ -407,34 +408,8 @@ ksp_type = "{PAYLOAD}"
 
 
 # -- property test: any TOML in, a Scene or a SceneError out ---------------------------------
-def _toml_string(s: str) -> str:
-    out = []
-    for c in s:
-        out.append(f"\\u{ord(c):04x}" if ord(c) < 32 or c in '"\\\x7f' else c)
-    return '"' + "".join(out) + '"'
-
-
-def to_toml(value) -> str:
-    """Inline TOML of a value (top level: ``key = value`` lines); floats keep nan/inf/-0.0."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return repr(value) if math.isfinite(value) else str(value)
-    if isinstance(value, str):
-        return _toml_string(value)
-    if isinstance(value, (datetime.datetime, datetime.date, datetime.time)):
-        return value.isoformat()
-    if isinstance(value, list):
-        return "[" + ", ".join(to_toml(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{_toml_string(k)} = {to_toml(v)}" for k, v in value.items()) + "}"
-    raise TypeError(type(value))
-
-
 def scene_text(data: dict) -> str:
-    return "".join(f"{_toml_string(k)} = {to_toml(v)}\n" for k, v in data.items())
+    return "".join(f"{to_toml(k)} = {to_toml(v)}\n" for k, v in data.items())
 
 
 TEXT = st.text(st.characters(exclude_categories=("Cs",)), max_size=12)

@@ -31,7 +31,8 @@ from conftest import ROOT, clean_environment, fem_anim_command, mpirun_command
 from dolfinx import fem
 from mpi4py import MPI
 from test_cli import read_stats
-from test_reference_comparison import Comparison, toml_list
+from scenes import make_scene
+from test_reference_comparison import Comparison
 
 from fem_anim import reference
 from fem_anim.contact import KEEP_FRACTION
@@ -53,21 +54,12 @@ OBSTACLES = {
 }
 
 
-def obstacle_toml(obstacle: dict) -> str:
-    lines = ["[[obstacle]]", f'type = "{obstacle["type"]}"']
-    for key, value in obstacle.items():
-        if key != "type":
-            lines.append(f"{key} = {toml_list(value) if isinstance(value, list) else value}")
-    return "\n".join(lines) + "\n"
-
-
 def reference_scene(tmp_path, kind: str, d: int, friction: float = 0.0):
     obstacle = OBSTACLES[kind, d] | {"dhat": DHAT, "stiffness": 3.0e3, "friction": friction}
     size = [1.0, 0.25] if d == 2 else [1.0, 0.25, 0.25]
-    path = tmp_path / f"{kind}{d}.toml"
-    path.write_text(f"[mesh]\ndim = {d}\nsize = {toml_list(size)}\nelement_size = 0.25\n"
-                    + obstacle_toml(obstacle))
-    return load_scene(path), obstacle
+    scene = {"name": f"{kind}{d}", "mesh": {"dim": d, "size": size, "element_size": 0.25},
+             "obstacle": [obstacle]}
+    return make_scene(tmp_path, scene), obstacle
 
 
 def near_contact_positions(points: np.ndarray, seed: int = 0) -> np.ndarray:
@@ -176,28 +168,16 @@ def test_step_bound_stops_at_keep_fraction(tmp_path, kind):
 
 
 # -- physics ------------------------------------------------------------------------------------
-BOX = """name = "{name}"
-[mesh]
-size = [0.2, 0.2, 0.2]
-origin = {origin}
-element_size = 0.1
-[material]
-youngs_modulus = {E}
-[time]
-integrator = "{integrator}"
-dt = {dt}
-steps = {steps}
-[gravity]
-acceleration = {gravity}
-"""
-
-
 def box_scene(tmp_path, obstacles: str, *, name="box", origin=(-0.1, -0.1, 0.02), E=1e4,
               integrator="implicit_euler", dt=0.01, steps=40, gravity=(0.0, 0.0, -G)):
-    path = tmp_path / f"{name}.toml"
-    path.write_text(BOX.format(name=name, origin=toml_list(origin), E=E, integrator=integrator,
-                               dt=dt, steps=steps, gravity=toml_list(gravity)) + obstacles)
-    return load_scene(path)
+    """A 0.2 m cube falling from ``origin`` onto ``obstacles`` (TOML text)."""
+    scene = {"name": name,
+             "mesh": {"size": [0.2, 0.2, 0.2], "origin": list(map(float, origin)),
+                      "element_size": 0.1},
+             "material": {"youngs_modulus": E},
+             "time": {"integrator": integrator, "dt": dt, "steps": steps},
+             "gravity": {"acceleration": list(map(float, gravity))}}
+    return make_scene(tmp_path, scene, obstacles)
 
 
 def run_steps(sim: Simulation, steps: int, state=None):

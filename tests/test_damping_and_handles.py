@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scenes
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
@@ -18,33 +19,16 @@ from fem_anim.forms.damping import dissipation_potential
 from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
 
-BAR = """
-name = "bar"
-[mesh]
-size = [1.0, 0.1, 0.1]
-element_size = 0.1
-[material]
-model = "linear"
-youngs_modulus = 1e5
-[time]
-integrator = "{integrator}"
-dt = 0.005
-steps = 40
-{damping}
-[[pin]]
-name = "wall"
-min = [-0.01, -1, -1]
-max = [0.01, 1, 1]
-"""
-
 
 def bar(tmp_path, integrator="newmark", alpha=None, beta=None, extra=""):
-    damping = ""
+    damping = None
     if alpha is not None or beta is not None:
-        damping = f"[damping]\nalpha = {alpha or 0.0}\nbeta = {beta or 0.0}\n"
-    path = tmp_path / "bar.toml"
-    path.write_text(BAR.format(integrator=integrator, damping=damping) + extra)
-    sim = Simulation(load_scene(path), MPI.COMM_WORLD, {"snes_rtol": "1e-12"})
+        damping = {"alpha": alpha or 0.0, "beta": beta or 0.0}
+    scene = scenes.make_scene(tmp_path, scenes.bar(
+        "bar", material={"model": "linear", "youngs_modulus": 1e5},
+        time={"integrator": integrator, "dt": 0.005, "steps": 40}, damping=damping,
+        pin=[{"name": "wall", "min": [-0.01, -1, -1], "max": [0.01, 1, 1]}]), extra)
+    sim = Simulation(scene, MPI.COMM_WORLD, {"snes_rtol": "1e-12"})
     state = sim.initial_state()
     X = sim.problem.V.tabulate_dof_coordinates()
     state.v = np.zeros_like(state.u)

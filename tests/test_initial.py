@@ -18,20 +18,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mpi4py import MPI
-from test_analytic import box, cross, scipy_matrix, toml_list
+from scenes import DENSITY, DIVISIONS, LENGTHS, beam, make_scene, toml_list
+from test_analytic import box, cross, scipy_matrix
 
 from fem_anim.errors import SceneError
 from fem_anim.initial import rigid_velocity
-from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
                                 reason="serial: the checks work on global dof arrays")
 
 NEWTON = {"snes_rtol": "1e-12", "snes_atol": "1e-14"}
-LENGTHS = {2: (1.0, 0.25), 3: (1.0, 0.25, 0.25)}
-DIVISIONS = {2: (4, 2), 3: (4, 2, 2)}
-DENSITY = 1000.0
 VELOCITY = (0.3, -0.2, 0.1)
 OMEGA = {2: 2.0, 3: [0.5, 1.0, 1.5]}
 DT, STEPS = 0.05, 10
@@ -39,23 +36,8 @@ DT, STEPS = 0.05, 10
 
 def write_scene(directory, name: str, d: int, initial: str, *, degree: int = 1,
                 extra: str = ""):
-    text = f"""name = "{name}"
-[mesh]
-dim = {d}
-size = {toml_list(LENGTHS[d])}
-element_size = 0.25
-[element]
-degree = {degree}
-[material]
-model = "neohookean"
-youngs_modulus = 1e4
-density = {DENSITY}
-[initial]
-{initial}
-{extra}"""
-    path = directory / f"{name}.toml"
-    path.write_text(text)
-    return load_scene(path)
+    scene = beam(name, d, element={"degree": degree}, material={"model": "neohookean"})
+    return make_scene(directory, scene, f"[initial]\n{initial}\n{extra}")
 
 
 def simulation(scene, d: int) -> Simulation:

@@ -31,9 +31,9 @@ import ufl
 from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
+from scenes import bar, make_scene
 
 from fem_anim.errors import ConvergenceError
-from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
 
 serial_only = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
@@ -41,34 +41,6 @@ serial_only = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
 
 #: Tight Newton tolerances: the time-discretisation error, not the solver, must dominate.
 SOLVER = {"snes_rtol": "1e-12", "snes_atol": "1e-15"}
-
-BAR = """\
-name = "vibrating_bar"
-[mesh]
-size = [1.0, 0.1, 0.1]
-element_size = 0.1
-[material]
-model = "{model}"
-mass = "{mass}"
-[time]
-integrator = "{integrator}"
-[[pin]]
-name = "wall"
-min = [-1.0e-6, -1.0, -1.0]
-max = [1.0e-6, 1.0, 1.0]
-"""
-
-FREE_BODY = """\
-name = "free_fall"
-[mesh]
-size = [1.0, 0.1, 0.1]
-element_size = 0.1
-[material]
-model = "neohookean"
-mass = "{mass}"
-[gravity]
-acceleration = [0.0, 0.0, -9.81]
-"""
 
 ORDERS = {"newmark": 2, "implicit_euler": 1, "bdf2": 2}
 
@@ -87,9 +59,10 @@ class Bars:
                  mass: str = "consistent") -> Simulation:
         key = (integrator, model, mass)
         if key not in self.cache:
-            path = self.directory / f"bar_{integrator}_{model}_{mass}.toml"
-            path.write_text(BAR.format(integrator=integrator, model=model, mass=mass))
-            self.cache[key] = Simulation(load_scene(path), MPI.COMM_WORLD, cli_options=SOLVER)
+            scene = make_scene(self.directory, bar(
+                f"bar_{integrator}_{model}_{mass}", material={"model": model, "mass": mass},
+                time={"integrator": integrator}))
+            self.cache[key] = Simulation(scene, MPI.COMM_WORLD, cli_options=SOLVER)
         return self.cache[key]
 
 
@@ -364,9 +337,9 @@ def test_symplectic_euler_blows_up_above_limit(bars, omega_max, mass, fraction):
 @pytest.mark.parametrize("mass", ["consistent", "lumped"])
 def test_newmark_free_fall_is_exact(tmp_path, mass):
     """No pins: a_0 = M^-1 M g = g, and Newmark integrates constant acceleration exactly."""
-    path = tmp_path / "free_fall.toml"
-    path.write_text(FREE_BODY.format(mass=mass))
-    sim = Simulation(load_scene(path), MPI.COMM_WORLD, cli_options=SOLVER)
+    scene = make_scene(tmp_path, bar("free_fall", material={"model": "neohookean", "mass": mass},
+                                     gravity={"acceleration": [0.0, 0.0, -9.81]}, pin=[]))
+    sim = Simulation(scene, MPI.COMM_WORLD, cli_options=SOLVER)
     g = np.array([0.0, 0.0, -9.81])
     state = sim.initial_state()
     assert np.abs(state.a.reshape(-1, 3) - g).max() < 1e-12 * 9.81

@@ -36,12 +36,12 @@ from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
+from scenes import DENSITY, DIVISIONS, LENGTHS, POISSON_RATIO, YOUNGS_MODULUS, beam, make_scene
 
 from fem_anim import reference
 from fem_anim.mesh import mesh_from_arrays
 from fem_anim.output import VertexGather
 from fem_anim.problem import EnergyProblem
-from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
 
 pytestmark = pytest.mark.skipif(
@@ -64,12 +64,8 @@ MATERIALS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean")
 DIMS = (2, 3)
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 
-# The body: a 1 m beam, 4 cells along its length; Kuhn simplices (2 per square, 6 per cube).
-DIVISIONS = {2: (4, 2), 3: (4, 2, 2)}
-LENGTHS = {2: (1.0, 0.25), 3: (1.0, 0.25, 0.25)}
-YOUNGS_MODULUS = 1.0e4  # Pa: soft, the beam sags by ~0.6 m within the 20 steps
-POISSON_RATIO = 0.3
-DENSITY = 1000.0  # kg/m^3
+# The body: the reference beam of tests/scenes.py (DIVISIONS, LENGTHS, the material): 1 m,
+# 4 cells along its length; Kuhn simplices (2 per square, 6 per cube).
 GRAVITY = {2: (0.0, -9.81), 3: (0.0, -9.81, 0.0)}  # m/s^2
 PIN_MIN = {2: (-1e-6, -1.0), 3: (-1e-6, -1.0, -1.0)}  # the face x = 0
 PIN_MAX = {2: (1e-6, 1.0), 3: (1e-6, 1.0, 1.0)}
@@ -83,41 +79,15 @@ REFERENCE_NEWTON = {"atol": 1e-12, "rtol": 1e-14}
 # --- scenes, meshes and the dof map --------------------------------------------------------------
 
 
-def toml_list(values) -> str:
-    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
-
-
 def write_scene(directory, d: int, material: str, *, mass: str = "consistent",
                 integrator: str = "newmark", pinned: bool = False):
     """A scene for the reference beam (its ``[mesh]`` is validated but not built)."""
     name = f"{material}_{d}d_{mass}_{integrator}{'_pinned' if pinned else ''}"
-    text = f"""name = "{name}"
-[mesh]
-dim = {d}
-size = {toml_list(LENGTHS[d])}
-element_size = 0.25
-[material]
-model = "{material}"
-youngs_modulus = {YOUNGS_MODULUS}
-poisson_ratio = {POISSON_RATIO}
-density = {DENSITY}
-mass = "{mass}"
-[time]
-integrator = "{integrator}"
-dt = {DT[integrator]}
-steps = {STEPS}
-[gravity]
-acceleration = {toml_list(GRAVITY[d])}
-"""
-    if pinned:
-        text += f"""[[pin]]
-name = "wall"
-min = {toml_list(PIN_MIN[d])}
-max = {toml_list(PIN_MAX[d])}
-"""
-    path = directory / f"{name}.toml"
-    path.write_text(text)
-    return load_scene(path)
+    return make_scene(directory, beam(
+        name, d, material={"model": material, "mass": mass},
+        time={"integrator": integrator, "dt": DT[integrator], "steps": STEPS},
+        gravity={"acceleration": GRAVITY[d]},
+        pin=[{"name": "wall", "min": PIN_MIN[d], "max": PIN_MAX[d]}] if pinned else None))
 
 
 def beam_mesh(d: int):

@@ -28,48 +28,31 @@ import ufl
 from conftest import ROOT, fem_anim_command
 from dolfinx import fem
 from mpi4py import MPI
+from scenes import DIVISIONS, LENGTHS, bar, beam, make_scene, wall_pin
 from test_analytic import assembled_vector, scipy_matrix, set_displacement
 from test_reference_comparison import (
     ASSEMBLY_RTOL,
-    DIVISIONS,
-    LENGTHS,
     assert_close,
     deformed_positions,
     reference_order,
-    toml_list,
 )
 
 from fem_anim import reference
 from fem_anim.errors import SceneError
 from fem_anim.mesh import mesh_from_arrays
 from fem_anim.problem import EnergyProblem
-from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
                                 reason="serial: the numpy reference and the dof map are rank-local")
 
 GROUPS = {"soft": 1, "stiff": 2}
-BASE = {"model": "neohookean", "youngs_modulus": 1.0e4, "poisson_ratio": 0.3, "density": 1000.0}
 
 
-def write_scene(directory, name: str, d: int, regions: str, extra: str = "",
-                base: dict = BASE):
-    text = f"""name = "{name}"
-[mesh]
-dim = {d}
-size = {toml_list(LENGTHS[d])}
-element_size = 0.25
-[material]
-model = "{base['model']}"
-youngs_modulus = {base['youngs_modulus']}
-poisson_ratio = {base['poisson_ratio']}
-density = {base['density']}
-{extra}
-{regions}"""
-    path = directory / f"{name}.toml"
-    path.write_text(text)
-    return load_scene(path)
+def write_scene(directory, name: str, d: int, regions: str, **overrides):
+    """The reference beam, neo-Hookean, with ``regions`` (TOML text) appended."""
+    scene = beam(name, d, material={"model": "neohookean"}, **overrides)
+    return make_scene(directory, scene, regions)
 
 
 def two_region_beam(d: int, divisions=None, lengths=None):
@@ -122,7 +105,7 @@ def test_two_region_assembly_matches_reference(tmp_path, d, case):
     regions = regions.replace(", -1.0, -1.0]", ", -1.0]" if d == 2 else ", -1.0, -1.0]")
     regions = regions.replace(", 1.0, 1.0]", ", 1.0]" if d == 2 else ", 1.0, 1.0]")
     scene = write_scene(tmp_path, f"{case}_{d}", d, regions,
-                        extra=f"[gravity]\nacceleration = {toml_list([0.0, -9.81, 0.0][:d])}")
+                        gravity={"acceleration": [0.0, -9.81, 0.0][:d]})
     points, cells, centroids, domain = two_region_beam(d)
     problem = EnergyProblem(scene, domain)
     assert len(problem.elastic_terms) == len(set(models))
@@ -185,38 +168,14 @@ PULL_TIME = 1.0e4  # s: one implicit Euler step this long is a static solve (ine
 def pull_bar(tmp_path, model: str, delta: float, nu: float = 0.0):
     """Pin x = 0, move the x = L face by ``delta`` in one long implicit Euler step."""
     L = BAR_LENGTHS[0]
-    regions = f"""[[region]]
-name = "stiff_half"
-min = [{L / 2}, -1.0, -1.0]
-max = [{2 * L}, 1.0, 1.0]
-youngs_modulus = {STIFF}
-[time]
-integrator = "implicit_euler"
-dt = {PULL_TIME}
-steps = 1
-[[pin]]
-name = "wall"
-min = [-1e-6, -1.0, -1.0]
-max = [1e-6, 1.0, 1.0]
-[[pin]]
-name = "handle"
-min = [{L - 1e-6}, -1.0, -1.0]
-max = [{L + 1e-6}, 1.0, 1.0]
-velocity = [{delta / PULL_TIME}, 0.0, 0.0]
-"""
-    text = f"""name = "bar_{model}"
-[mesh]
-size = {toml_list(BAR_LENGTHS)}
-element_size = 0.1
-[material]
-model = "{model}"
-youngs_modulus = {SOFT}
-poisson_ratio = {nu}
-density = 1000.0
-{regions}"""
-    path = tmp_path / f"bar_{model}.toml"
-    path.write_text(text)
-    scene = load_scene(path)
+    scene = make_scene(tmp_path, bar(
+        f"bar_{model}", mesh={"size": list(BAR_LENGTHS)},
+        material={"model": model, "youngs_modulus": SOFT, "poisson_ratio": nu, "density": 1000.0},
+        region=[{"name": "stiff_half", "min": [L / 2, -1.0, -1.0], "max": [2 * L, 1.0, 1.0],
+                 "youngs_modulus": STIFF}],
+        time={"integrator": "implicit_euler", "dt": PULL_TIME, "steps": 1},
+        pin=[wall_pin(), {"name": "handle", "min": [L - 1e-6, -1.0, -1.0],
+                          "max": [L + 1e-6, 1.0, 1.0], "velocity": [delta / PULL_TIME, 0.0, 0.0]}]))
     points, cells = reference.box_mesh(BAR_DIVISIONS, BAR_LENGTHS)
     domain = mesh_from_arrays(MPI.COMM_SELF, points, cells, None, "bar")
     sim = Simulation(scene, MPI.COMM_SELF, {"snes_rtol": "1e-14", "snes_atol": "1e-16"},
@@ -255,8 +214,8 @@ def test_two_material_bar_is_a_series_spring(tmp_path, model, rtol):
 # --- 3. validation -------------------------------------------------------------------------------
 
 
-def problem_error(tmp_path, d: int, regions: str, extra: str = "") -> str:
-    scene = write_scene(tmp_path, "bad", d, regions, extra)
+def problem_error(tmp_path, d: int, regions: str) -> str:
+    scene = write_scene(tmp_path, "bad", d, regions)
     _, _, _, domain = two_region_beam(d)
     with pytest.raises(SceneError) as err:
         EnergyProblem(scene, domain)
