@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .common import boundary_of, entities_in_box, name_group, padded_origin
+from .common import entities_in_box, name_body, name_group, padded_origin
 
 __all__ = ["build_box"]
 
@@ -35,8 +35,7 @@ def build_box(model, size: Sequence[float], element_size: float,
     else:
         tag = model.occ.addRectangle(*lo, *size)
     model.occ.synchronize()
-    name_group(model, dim, [tag], 1, "body")
-    name_group(model, dim - 1, boundary_of(model, dim, [tag]), 1, "surface")
+    name_body(model, dim, [tag])
     names = ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"]
     for side, name in enumerate(names[: 2 * dim]):
         axis, upper = divmod(side, 2)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .common import boundary_of, entities_in_box, name_group, padded_origin, set_element_size
+from .common import name_body, name_ends, padded_origin, set_element_size
 
 __all__ = ["build_capsule"]
 
@@ -45,18 +45,9 @@ def build_capsule(model, radius: float, length: float, element_size: float,
     fused, _ = model.occ.fuse(parts[:1], parts[1:])
     model.occ.synchronize()
     body = [t for _, t in fused]
-    name_group(model, dim, body, 1, "body")
-    boundary = boundary_of(model, dim, body)
-    name_group(model, dim - 1, boundary, 1, "surface")
-    scale = max(radius, length)
-    r = radius if dim == 3 else 0.0
-    xmin = entities_in_box(model, dim - 1, [o[0] - radius, o[1] - radius, o[2] - r],
-                           [o[0], o[1] + radius, o[2] + r], scale)
-    xmax = entities_in_box(model, dim - 1, [end[0], o[1] - radius, o[2] - r],
-                           [end[0] + radius, o[1] + radius, o[2] + r], scale)
-    name_group(model, dim - 1, xmin, 2, "xmin")
-    name_group(model, dim - 1, xmax, 3, "xmax")
-    name_group(model, dim - 1, [t for t in boundary if t not in xmin + xmax], 4, "side")
+    boundary = name_body(model, dim, body)
+    caps = [(o[0] - radius, o[0]), (end[0], end[0] + radius)]
+    name_ends(model, dim, boundary, caps, o, radius, max(radius, length))
     set_element_size(model, element_size)
     model.mesh.generate(dim)
     return model

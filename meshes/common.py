@@ -1,10 +1,15 @@
-"""Helpers shared by the gmsh builders: physical groups, element size, entity lookup."""
+"""Helpers shared by the gmsh builders: physical groups, element size, entity lookup.
+
+Every builder names the groups :func:`name_body` makes (``body`` and ``surface``, tag 1);
+the bodies along x (cylinder, capsule) also name their ends and side (:func:`name_ends`).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-__all__ = ["boundary_of", "entities_in_box", "name_group", "padded_origin", "set_element_size"]
+__all__ = ["boundary_of", "entities_in_box", "name_body", "name_ends", "name_group",
+           "padded_origin", "set_element_size"]
 
 
 def padded_origin(origin: Sequence[float] | None, dim: int) -> list[float]:
@@ -20,6 +25,37 @@ def name_group(model, dim: int, entities: Sequence[int], tag: int, name: str) ->
     group = model.addPhysicalGroup(dim, list(entities), tag)
     model.setPhysicalName(dim, group, name)
     return group
+
+
+def name_body(model, dim: int, body: Sequence[int]) -> list[int]:
+    """Name ``body`` (the ``dim``-entities ``body``) and ``surface`` (their boundary), tag 1.
+
+    Returns:
+        The tags of the boundary's ``(dim - 1)``-entities, for naming parts of it.
+    """
+    name_group(model, dim, body, 1, "body")
+    boundary = boundary_of(model, dim, body)
+    name_group(model, dim - 1, boundary, 1, "surface")
+    return boundary
+
+
+def name_ends(model, dim: int, boundary: Sequence[int], x_ranges, centre: Sequence[float],
+              radius: float, scale: float) -> None:
+    """Name the ends of a body along x, ``xmin`` and ``xmax`` (tags 2, 3), and ``side`` (tag 4).
+
+    An end is the boundary entities in the box of x in its range of ``x_ranges`` (one
+    ``(lo, hi)`` per end) within ``radius`` of the axis through ``centre`` (y and, in 3D, z);
+    ``side`` is the rest of ``boundary``. ``scale`` is the size of the body
+    (:func:`entities_in_box`).
+    """
+    r = radius if dim == 3 else 0.0
+    ends = []
+    for tag, (name, (lo, hi)) in enumerate(zip(("xmin", "xmax"), x_ranges), start=2):
+        faces = entities_in_box(model, dim - 1, [lo, centre[1] - radius, centre[2] - r],
+                                [hi, centre[1] + radius, centre[2] + r], scale)
+        name_group(model, dim - 1, faces, tag, name)
+        ends += faces
+    name_group(model, dim - 1, [t for t in boundary if t not in ends], 4, "side")
 
 
 def set_element_size(model, element_size: float) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .common import boundary_of, entities_in_box, name_group, padded_origin, set_element_size
+from .common import name_body, name_ends, padded_origin, set_element_size
 
 __all__ = ["build_cylinder"]
 
@@ -38,18 +38,9 @@ def build_cylinder(model, radius: float, length: float, element_size: float,
     else:
         tag = model.occ.addRectangle(o[0], o[1] - radius, 0.0, length, 2.0 * radius)
     model.occ.synchronize()
-    name_group(model, dim, [tag], 1, "body")
-    boundary = boundary_of(model, dim, [tag])
-    name_group(model, dim - 1, boundary, 1, "surface")
-    scale = max(radius, length)
-    r = radius if dim == 3 else 0.0
-    ends = []
-    for group, (name, x) in enumerate((("xmin", o[0]), ("xmax", o[0] + length)), start=2):
-        faces = entities_in_box(model, dim - 1, [x, o[1] - radius, o[2] - r],
-                                [x, o[1] + radius, o[2] + r], scale)
-        name_group(model, dim - 1, faces, group, name)
-        ends += faces
-    name_group(model, dim - 1, [t for t in boundary if t not in ends], 4, "side")
+    boundary = name_body(model, dim, [tag])
+    x0, x1 = o[0], o[0] + length
+    name_ends(model, dim, boundary, [(x0, x0), (x1, x1)], o, radius, max(radius, length))
     set_element_size(model, element_size)
     model.mesh.generate(dim)
     return model

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .common import boundary_of, name_group, padded_origin, set_element_size
+from .common import name_body, padded_origin, set_element_size
 
 __all__ = ["build_sphere"]
 
@@ -36,8 +36,7 @@ def build_sphere(model, radius: float, element_size: float,
     else:
         tag = model.occ.addDisk(*centre, radius, radius)
     model.occ.synchronize()
-    name_group(model, dim, [tag], 1, "body")
-    name_group(model, dim - 1, boundary_of(model, dim, [tag]), 1, "surface")
+    name_body(model, dim, [tag])
     set_element_size(model, element_size)
     model.mesh.generate(dim)
     return model

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .common import name_group, set_element_size
+from .common import name_body, set_element_size
 
 __all__ = ["build_volume_from_surface"]
 
@@ -47,8 +47,7 @@ def build_volume_from_surface(model, points: np.ndarray, triangles: np.ndarray,
     loop = model.geo.addSurfaceLoop(patches)
     body = model.geo.addVolume([loop])
     model.geo.synchronize()
-    name_group(model, 3, [body], 1, "body")
-    name_group(model, 2, patches, 1, "surface")
+    name_body(model, 3, [body])
     set_element_size(model, element_size)
     model.mesh.generate(3)
     return model

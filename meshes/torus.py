@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .common import boundary_of, entities_in_box, name_group, padded_origin, set_element_size
+from .common import entities_in_box, name_body, name_group, padded_origin, set_element_size
 
 __all__ = ["build_torus"]
 
@@ -47,9 +47,7 @@ def build_torus(model, radius: float, minor_radius: float, element_size: float,
         inner = model.occ.addDisk(*c, radius - minor_radius, radius - minor_radius)
         (_, tag), = model.occ.cut([(2, outer)], [(2, inner)])[0]
     model.occ.synchronize()
-    name_group(model, dim, [tag], 1, "body")
-    boundary = boundary_of(model, dim, [tag])
-    name_group(model, dim - 1, boundary, 1, "surface")
+    boundary = name_body(model, dim, [tag])
     if dim == 2:
         a = radius - minor_radius
         inner = entities_in_box(model, 1, [c[0] - a, c[1] - a, 0.0], [c[0] + a, c[1] + a, 0.0],
