@@ -13,14 +13,18 @@ wrapped here, so moving to a newer DOLFINx is a change to this file only:
 ``Quadrature`` ufl element                basix quadrature element (0.7)
 ``mesh.create_mesh(comm, cells, x, d)``  ``d`` became a basix/ufl element (0.8)
 ``geometry.BoundingBoxTree(mesh, d)``    ``geometry.bb_tree(mesh, d)`` (0.7)
+``fem.FormMetaClass``, ``jit.ffcx_jit``   ``fem.Form``, ``form_cpp_class`` (0.7)
 =======================================  ==========================================
 """
 
 from __future__ import annotations
 
+import ffcx
+import ffcx.codegeneration.jit
 import numpy as np
 import ufl
-from dolfinx import fem, geometry
+from dolfinx import cpp as _cpp
+from dolfinx import fem, geometry, jit
 from dolfinx import mesh as dmesh
 
 __all__ = [
@@ -31,6 +35,7 @@ __all__ = [
     "geometry_dofmap",
     "create_mesh",
     "colliding_cells",
+    "compile_forms_together",
 ]
 
 
@@ -83,3 +88,41 @@ def colliding_cells(mesh, points: np.ndarray):
     tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
     candidates = geometry.compute_collisions(tree, points)
     return geometry.compute_colliding_cells(mesh, candidates, points)
+
+
+def compile_forms_together(forms: dict[str, ufl.Form], jit_params: dict) -> dict[str, fem.FormMetaClass]:
+    """Compile several real-valued forms on one mesh into one FFCx module (one gcc run).
+
+    ``fem.form`` compiles every form into its own C module; the forms of one problem
+    compiled together take about half the time (9 forms of the default scene: 3.0 s
+    against 5.8 s with a cold cache). Under MPI rank 0 compiles and the others then load
+    the module from the cache (DOLFINx's ``mpi_jit_decorator``). The Forms built are the
+    ones ``fem.form`` builds (same coefficients, constants, subdomain data).
+    """
+    ufl_forms = list(forms.values())
+    mesh = ufl_forms[0].ufl_domain().ufl_cargo()
+    p_ffcx = ffcx.get_parameters({"scalar_type": "double"})
+    p_jit = jit.get_parameters(jit_params)
+
+    @jit.mpi_jit_decorator
+    def compile_all():
+        return ffcx.codegeneration.jit.compile_forms(ufl_forms, parameters=p_ffcx, **p_jit)
+
+    compiled, module, code = compile_all(mesh.comm)
+    formcls = type("Form", (fem.FormMetaClass, _cpp.fem.Form_float64), {})
+    out = {}
+    for name, form, ufcx_form in zip(forms, ufl_forms, compiled):
+        subdomains, = form.subdomain_data().values()
+        spaces = [arg.ufl_function_space()._cpp_object for arg in form.arguments()]
+        original = form.coefficients()
+        coefficients = [original[ufcx_form.original_coefficient_position[i]]._cpp_object
+                        for i in range(ufcx_form.num_coefficients)]
+        constants = [c._cpp_object for c in form.constants()]
+        types = _cpp.fem.IntegralType
+        markers = {types.cell: subdomains.get("cell"),
+                   types.exterior_facet: subdomains.get("exterior_facet"),
+                   types.interior_facet: subdomains.get("interior_facet"),
+                   types.vertex: subdomains.get("vertex")}
+        out[name] = formcls(ufcx_form, spaces, coefficients, constants, markers, mesh,
+                            module.ffi, code)
+    return out

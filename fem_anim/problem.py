@@ -72,7 +72,7 @@ def compile_forms(forms: dict[str, ufl.Form]) -> dict[str, fem.FormMetaClass]:
     """
     for form in forms.values():
         form.signature()
-    return {name: fem.form(form, jit_params=JIT_OPTIONS) for name, form in forms.items()}
+    return compat.compile_forms_together(forms, JIT_OPTIONS)
 
 
 def default_quadrature_degree(degree: int) -> int:
