@@ -277,6 +277,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "stopping": Key(str, "norm", _one_of(("norm", "decrement"))),
         "decrement_tol": Key(NUM, 1e-14, _positive),
         "hessian": Key(str, "exact", _one_of(("exact", "shift", "project"))),
+        "forcing": Key(str, "tight", _one_of(("tight", "adaptive"))),
         "inversion_filter": Key(bool, None),
         "petsc": Key(dict, {}, _check_petsc),
     },

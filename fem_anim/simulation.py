@@ -29,7 +29,8 @@ from .mesh import SimplexMesh, build_mesh
 from .output import (CellGather, RunDirectory, StatsWriter, TrajectoryWriter, VertexGather,
                      write_final, write_scene)
 from .petsc_options import flatten_options, merge_options
-from .presets import NEWTON_DEFAULTS, drop_replaced, parallel_note, preset_options
+from .presets import (NEWTON_DEFAULTS, drop_replaced, forcing_options, parallel_note,
+                      preset_options)
 from .problem import EnergyProblem
 from .progress import Progress
 from .solver import NONLINEAR_METHODS, Minimiser, SolveStats
@@ -61,7 +62,16 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
     method = NONLINEAR_METHODS[scene["solver"]["method"]]
     if scene["solver"]["hessian"] == "shift":
         layer = layer | {"mat_mumps_icntl_13": "1"}  # exact inertia from MUMPS in parallel
-    return merge_options(NEWTON_DEFAULTS, method, layer, above)
+    forcing = scene["solver"]["forcing"]
+    if forcing != "tight" and scene["solver"]["method"] not in ("newton", "trust_region"):
+        raise FemAnimError(f"solver.forcing = {forcing!r} sets the Krylov tolerance of Newton's "
+                           f"linear solves; solver.method = {scene['solver']['method']!r} has "
+                           "none (use 'newton' or 'trust_region')")
+    try:
+        forcing = forcing_options(forcing, merge_options(layer, above))
+    except ValueError as err:
+        raise FemAnimError(str(err)) from None
+    return merge_options(NEWTON_DEFAULTS, method, layer, forcing, above)
 
 
 @dataclass

@@ -25,6 +25,7 @@ from conftest import clean_environment, fem_anim_command, mpirun_command
 from mpi4py import MPI
 
 from fem_anim.cli import main
+from fem_anim.errors import FemAnimError, SceneError
 from fem_anim.presets import (
     NEWTON_DEFAULTS,
     PRESETS,
@@ -197,6 +198,49 @@ def test_iterative_presets_are_tight_enough_for_newton():
     for name, options in PRESETS.items():
         if options["ksp_type"] != "preonly":
             assert float(options["ksp_rtol"]) <= 1e-10, name
+
+
+# -- solver.forcing: Eisenstat-Walker Krylov tolerances ----------------------------------
+@serial_only
+@pytest.mark.parametrize("name", ["cg-icc", "cg-jacobi"])
+def test_adaptive_forcing_reaches_the_same_solution_with_fewer_krylov_iterations(
+        name, tmp_path):
+    """Newton still stops at the residual test; only the linear solves are looser."""
+    fine = ["--set", "mesh.element_size=0.05", "--set", "time.steps=4"]
+    tight = run(tmp_path / "tight", "--solver", name, *fine)
+    adaptive = run(tmp_path / "adaptive", "--solver", name, *fine,
+                   "--set", 'solver.forcing="adaptive"')
+    assert all(r["snes_reason"] > 0 for r in adaptive)
+    newton = sum(r["newton_its"] for r in tight), sum(r["newton_its"] for r in adaptive)
+    linear = sum(r["linear_its"] for r in tight), sum(r["linear_its"] for r in adaptive)
+    assert newton[1] <= newton[0] + len(tight)  # at most one more Newton step per time step
+    print(f"{name}: Newton its {newton}, Krylov its {linear}")
+    assert linear[1] < 0.6 * linear[0]
+    u, u_ref = final_displacement(tmp_path / "adaptive"), final_displacement(tmp_path / "tight")
+    # both are Newton to ||grad g|| <= 1e-8 ||grad g_0||: the same step to that tolerance
+    assert np.linalg.norm(u - u_ref) <= 1e-7 * np.linalg.norm(u_ref)
+    for a, t in zip(adaptive, tight):
+        for key in ENERGIES:
+            assert a[key] == pytest.approx(t[key], rel=1e-7, abs=1e-12)
+
+
+def test_adaptive_forcing_options_and_where_it_does_not_apply(tmp_path):
+    scene = load_scene(None, ['solver.forcing="adaptive"'])
+    options = solver_options(scene, preset="cg-icc")
+    assert options["snes_ksp_ew"] == "" and options["snes_ksp_ew_version"] == "2"
+    assert float(options["snes_ksp_ew_rtolmax"]) == 1e-2
+    assert "snes_ksp_ew" not in solver_options(load_scene(None, []), preset="cg-icc")
+    # the command line's Krylov solver decides, not the preset's
+    assert "snes_ksp_ew" in solver_options(scene, {"ksp_type": "cg", "pc_type": "jacobi"},
+                                           preset="cholesky")
+    for preset, words in (("cholesky", "direct solve"), ("richardson-sor", "SOR sweeps")):
+        with pytest.raises(FemAnimError, match=f"solver.forcing.*{words}"):
+            solver_options(scene, preset=preset)
+    lbfgs = load_scene(None, ['solver.forcing="adaptive"', 'solver.method="lbfgs"'])
+    with pytest.raises(FemAnimError, match="solver.method = 'lbfgs' has none"):
+        solver_options(lbfgs, preset="cg-icc")
+    with pytest.raises(SceneError, match="solver.forcing must be one of tight, adaptive"):
+        load_scene(None, ['solver.forcing="loose"'])
 
 
 # -- MPI -----------------------------------------------------------------------------------

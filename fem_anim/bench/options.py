@@ -9,7 +9,9 @@ Every option here is off by default and given as PETSc options (command line or 
 * preconditioner lagging ``-snes_lag_preconditioner 2``: Krylov presets keep the ICC factor
   of an older Hessian;
 * Eisenstat-Walker forcing ``-snes_ksp_ew``: the Krylov tolerance follows the Newton
-  residual instead of ``ksp_rtol`` (iterative presets);
+  residual instead of ``ksp_rtol`` (iterative presets), with PETSc's parameters and with
+  the scene's ``solver.forcing = "adaptive"`` (choice 2 capped at 1e-2,
+  :data:`fem_anim.presets.FORCING`);
 * storage ``-mat_type aij`` against the Krylov presets' default ``baij`` (d x d blocks);
 * quadrature reduction ``element.quadrature_degree = 1`` for P2 (default 2).
 
@@ -32,7 +34,10 @@ OPTION_CASES = (
      {"snes_lag_jacobian": "2", "snes_lag_jacobian_persists": ""}, [], "cholesky (exact)"),
     ("cg-icc (exact, baij)", "cg-icc", {}, [], None),
     ("cg-icc, aij storage", "cg-icc", {"mat_type": "aij"}, [], "cg-icc (exact, baij)"),
-    ("cg-icc, Eisenstat-Walker", "cg-icc", {"snes_ksp_ew": ""}, [], "cg-icc (exact, baij)"),
+    ("cg-icc, Eisenstat-Walker (PETSc defaults)", "cg-icc", {"snes_ksp_ew": ""}, [],
+     "cg-icc (exact, baij)"),
+    ("cg-icc, solver.forcing = adaptive", "cg-icc", {}, ['solver.forcing="adaptive"'],
+     "cg-icc (exact, baij)"),
     ("cg-icc, lag preconditioner 2", "cg-icc",
      {"snes_lag_preconditioner": "2", "snes_lag_preconditioner_persists": ""}, [],
      "cg-icc (exact, baij)"),

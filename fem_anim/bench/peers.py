@@ -6,7 +6,9 @@ Same mesh (fem_anim's gmsh beam, its input arrays handed to every peer), same ma
 (stable neo-Hookean: the one model pbatoolkit and fem_anim share), same implicit Euler step
 dt, same Newton tolerance (||grad g|| <= max(1e-12, 1e-8 ||grad g_0||)). Compared:
 
-* fem_anim (DOLFINx + PETSc SNES, presets ``cholesky`` and ``cg-icc``);
+* fem_anim (DOLFINx + PETSc SNES): presets ``cholesky`` and ``cg-icc``, and ``cg-icc`` with
+  ``solver.forcing = "adaptive"`` (Eisenstat-Walker Krylov tolerances; Newton still stops
+  at the same residual test);
 * the project's hand-assembled numpy/scipy Newton (:mod:`fem_anim.reference`, sparse LU);
 * pbatoolkit (PyPI) in its own virtual environment (its numpy differs from the system's),
   run by :mod:`fem_anim.bench.pbat_worker`: Newton on its compiled stable neo-Hookean
@@ -62,6 +64,13 @@ def peer_python(install: bool = True) -> Path | None:
             print(f"pbatoolkit unavailable: `{' '.join(cmd)}` failed: {tail}", file=sys.stderr)
             return None
     return python
+
+
+#: fem_anim's configurations: (label, preset, scene overrides)
+FEM_ANIM_CONFIGS = (("fem_anim cholesky", "cholesky", []),
+                    ("fem_anim cg-icc", "cg-icc", []),
+                    ("fem_anim cg-icc, forcing adaptive", "cg-icc",
+                     ['solver.forcing="adaptive"']))
 
 
 def _fem_anim(scene, preset: str, steps: int):
@@ -125,13 +134,13 @@ def compare(scene_path, overrides, h: float, steps: int, python: Path | None, lo
     from ..mesh import build_mesh
     from ..scene import load_scene
 
-    scene = load_scene(scene_path, [*overrides, *SCENE_SETTINGS, f"mesh.element_size={h}",
-                                    f"time.steps={steps}"])
+    settings = [*overrides, *SCENE_SETTINGS, f"mesh.element_size={h}", f"time.steps={steps}"]
+    scene = load_scene(scene_path, settings)
     domain = build_mesh(MPI.COMM_SELF, scene)
     runs = {}
-    for preset in ("cholesky", "cg-icc"):
-        times, tip, r = _fem_anim(scene, preset, steps)
-        runs[f"fem_anim {preset}"] = (times, tip)
+    for label, preset, extra in FEM_ANIM_CONFIGS:
+        times, tip, r = _fem_anim(load_scene(scene_path, [*settings, *extra]), preset, steps)
+        runs[label] = (times, tip)
     tets = r["tets"]
     # the numpy reference costs ~25x fem_anim's step: on large meshes it runs the first
     # REFERENCE_STEPS_LARGE steps only (its tip is compared over those)
