@@ -299,6 +299,11 @@ def patch_problem(tmp_path_factory):
     return get
 
 
+#: (dimension, degree) of the patch tests; 3D P2 compiles the largest kernels of the suite
+#: (5-13 s per material with a cold FFCx cache) and runs in the slow tier.
+PATCH_CASES = [(2, 1), (2, 2), (3, 1), pytest.param(3, 2, marks=pytest.mark.slow)]
+
+
 def interior_nodes(problem, d: int) -> np.ndarray:
     X = problem.V.tabulate_dof_coordinates()[:, :d]
     L = np.asarray(PATCH_LENGTHS[d])
@@ -315,8 +320,7 @@ def traction_load(problem, P: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("material", MATERIALS)
-@pytest.mark.parametrize("degree", [1, 2])
-@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("d, degree", PATCH_CASES)
 def test_affine_patch(patch_problem, d, degree, material):
     """u = (A - I) X + b: energy vol psi(A), nodal forces those of the constant stress P(A)."""
     problem, gradient = patch_problem(d, degree, material)
@@ -350,8 +354,7 @@ RIGID_ENERGY_RTOL = 1e4 * EPS
 
 
 @pytest.mark.parametrize("material", MATERIALS)
-@pytest.mark.parametrize("degree", [1, 2])
-@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("d, degree", PATCH_CASES)
 def test_rigid_motion_patch(patch_problem, d, degree, material):
     """A finite rotation plus translation stores no energy and makes no force (but ``linear``)."""
     problem, gradient = patch_problem(d, degree, material)
