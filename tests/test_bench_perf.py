@@ -63,6 +63,7 @@ def test_growth_exponent_recovers_known_slopes():
     (["--sizes", "-1"], "--sizes"),
     (["--presets", "nope"], "unknown preset 'nope'"),
     (["--steps", "0"], "--steps"),
+    (["--repeats", "0"], "--repeats"),
     (["--bogus"], "unrecognized arguments"),
 ])
 def test_bad_arguments_exit_2_with_one_line(argv, fragment, capsys):
@@ -106,6 +107,26 @@ def test_driver_end_to_end(tmp_path):
     assert "growth exponent" in text and "| cg-icc |" in text
     assert (tmp_path / "perf.png").stat().st_size > 1000
     assert len((tmp_path / "perf.csv").read_text().splitlines()) == 3
+
+
+@pytest.mark.mpi
+def test_mpi_section_pairs_serial_and_two_ranks(tmp_path):
+    """--mpi: serial and mpirun -n 2 back to back, --repeats pairs, medians and each pair."""
+    from conftest import mpirun_command
+
+    if mpirun_command(2) is None:
+        pytest.skip("mpirun not available")
+    code = perf.main(["--sizes", "0.1", "--steps", "1", "--presets", "cg-icc", "--mpi",
+                      "--repeats", "2", "--out", str(tmp_path), "--set", "output.render=false"])
+    assert code == 0
+    text = (tmp_path / "perf.md").read_text()
+    section = text[text.index("## MPI"):]
+    rows = [line for line in section.splitlines() if line.startswith("| cg-icc |")]
+    assert [row.split("|")[2].strip() for row in rows] == ["1", "2"]
+    pairs = rows[1].split("|")[11].split(",")
+    assert len(pairs) == 2 and all(float(p) > 0 for p in pairs)
+    assert float(rows[1].split("|")[12]) == pytest.approx(np.median([float(p) for p in pairs]),
+                                                           abs=0.01)
 
 
 @pytest.mark.slow

@@ -11,7 +11,8 @@ and convergence tests), inversion filter, energies, symbolic and numeric factori
 linear solve and everything else (:mod:`fem_anim.bench.timing`). The growth exponent of the
 step time against the number of dofs is fitted per preset. Optional sections:
 
-* ``--mpi``: the largest mesh with ``mpirun -n 2`` and the parallel preset, against serial;
+* ``--mpi``: the largest mesh with ``mpirun -n 2`` and the parallel preset, against serial,
+  ``--repeats`` back-to-back pairs (median and every repeat's speed-up);
 * ``--blas``: reference BLAS/LAPACK against OpenBLAS (``LD_LIBRARY_PATH`` in the worker);
 * ``--options``: Jacobian lagging, Eisenstat-Walker forcing, BAIJ storage: time and the
   tip's deviation from the exact run (:mod:`fem_anim.bench.options`);
@@ -75,6 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--out", default="demos/results", help="output directory")
     p.add_argument("--mpi", action="store_true", help="mpirun -n 2 on the largest mesh")
+    p.add_argument("--repeats", type=int, default=3,
+                   help="serial/mpirun pairs per preset in --mpi (the median is reported)")
     p.add_argument("--blas", action="store_true", help="reference BLAS against OpenBLAS")
     p.add_argument("--options", action="store_true", help="lagging, Eisenstat-Walker, BAIJ")
     p.add_argument("--hard", action="store_true", help="the 60k run plain Newton fails")
@@ -89,6 +92,8 @@ def _validate(args) -> None:
 
     if args.steps < 1 or args.steps > 1000:
         raise FemAnimError(f"--steps: must be between 1 and 1000, got {args.steps}")
+    if not 1 <= args.repeats <= 20:
+        raise FemAnimError(f"--repeats: must be between 1 and 20, got {args.repeats}")
     for name in args.presets.split(","):
         if name not in PRESETS:
             raise FemAnimError(f"--presets: unknown preset {name!r} (see `fem-anim solvers`)")
