@@ -90,7 +90,8 @@ def colliding_cells(mesh, points: np.ndarray):
     return geometry.compute_colliding_cells(mesh, candidates, points)
 
 
-def compile_forms_together(forms: dict[str, ufl.Form], jit_params: dict) -> dict[str, fem.FormMetaClass]:
+def compile_forms_together(forms: dict[str, ufl.Form],
+                           jit_params: dict) -> dict[str, fem.FormMetaClass]:
     """Compile several real-valued forms on one mesh into one FFCx module (one gcc run).
 
     ``fem.form`` compiles every form into its own C module; the forms of one problem

@@ -46,10 +46,13 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
     (:func:`fem_anim.presets.parallel_options`). A preset's options that belong to a
     component a higher layer replaces (its ``pc_*`` when ``pc_type`` changes, ...) are
     dropped with it (``-pc_type icc`` on top of the MUMPS ``cholesky`` preset is ICC,
-    not "ICC by MUMPS"; :func:`fem_anim.presets.drop_replaced`).
+    not "ICC by MUMPS"; :func:`fem_anim.presets.drop_replaced`). ``solver.forcing``
+    (:func:`fem_anim.presets.forcing_options`) sits above the preset, below the scene's
+    own PETSc table.
 
     Raises:
-        FemAnimError: for an unknown preset name (naming ``solver.preset`` or ``--solver``).
+        FemAnimError: for an unknown preset name (naming ``solver.preset`` or ``--solver``),
+            or ``solver.forcing = "adaptive"`` where no Krylov solve is adapted.
     """
     name = preset or scene["solver"]["preset"]
     try:

@@ -37,7 +37,7 @@ __all__ = ["main", "peer_table", "peer_python", "PEER_VENV"]
 
 PEER_VENV = Path(os.environ.get("FEM_ANIM_PEER_VENV",
                                 Path.home() / ".cache" / "fem_anim_peer" / "venv"))
-PEER_SIZES = (0.025, 0.0155)  # 12.7k and 50.8k tetrahedra
+PEER_SIZES = (0.025, 0.0145)  # 12.7k and 61.0k tetrahedra
 VBD_SWEEPS = 20
 REFERENCE_STEPS_LARGE = 3
 SCENE_SETTINGS = ["material.model=\"stable_neohookean\"", "time.integrator=\"implicit_euler\"",
