@@ -61,7 +61,7 @@ EVENTS = {name: PETSc.Log.Event(f"FemAnim{name.capitalize()}")
 
 
 def compile_forms(forms: dict[str, ufl.Form]) -> dict[str, fem.FormMetaClass]:
-    """Compile UFL forms with FFCx, with cache keys that do not depend on history.
+    """Compile UFL forms with FFCx into one module, with cache keys that do not depend on history.
 
     UFL caches a form's signature (its JIT cache key) when first asked. Compiling one form
     changes what UFL computes afterwards for another form built from the same

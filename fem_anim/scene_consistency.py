@@ -16,12 +16,14 @@ from typing import Any
 
 from .errors import SceneError, show_value
 
-__all__ = ["check_consistency", "check_render", "MAX_CELLS", "OBSTACLE_KEYS",
-           "REGION_MATERIAL_KEYS"]
+__all__ = ["check_consistency", "check_render", "HESSIAN_METHODS", "MAX_CELLS",
+           "OBSTACLE_KEYS", "REGION_MATERIAL_KEYS"]
 
 MAX_CELLS = 2.0e7  # ~24 GB of memory for a P1 Newton step; larger is a typo, not a scene
 #: Keys each obstacle type needs, and the geometric keys it must not be given.
 OBSTACLE_KEYS = {"plane": ("normal",), "sphere": ("center", "radius")}
+#: ``solver.method`` values that solve with a Hessian (``solver.hessian``, ``solver.forcing``).
+HESSIAN_METHODS = ("newton", "trust_region")
 #: Keys of a ``[[region]]`` that override the body's ``[material]``.
 REGION_MATERIAL_KEYS = ("model", "youngs_modulus", "poisson_ratio", "density")
 
@@ -98,10 +100,14 @@ def check_consistency(data: dict[str, Any]) -> None:
         raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
                          "(row-sum lumping of P2 gives zero or negative vertex masses); use "
                          "\"consistent\"")
-    if data["solver"]["hessian"] != "exact" and data["solver"]["method"] not in (
-            "newton", "trust_region"):
-        raise SceneError(f"solver.hessian = \"{data['solver']['hessian']}\" modifies Newton's "
-                         f"Hessian; solver.method = \"{data['solver']['method']}\" uses none")
+    solver = data["solver"]
+    if solver["hessian"] != "exact" and solver["method"] not in HESSIAN_METHODS:
+        raise SceneError(f"solver.hessian = \"{solver['hessian']}\" modifies Newton's "
+                         f"Hessian; solver.method = \"{solver['method']}\" uses none")
+    if solver["forcing"] != "tight" and solver["method"] not in HESSIAN_METHODS:
+        raise SceneError(f"solver.forcing = {solver['forcing']!r} sets the Krylov tolerance of "
+                         f"Newton's linear solves; solver.method = {solver['method']!r} has "
+                         "none (use 'newton' or 'trust_region')")
 
 
 def _check_regions(data: dict[str, Any]) -> None:

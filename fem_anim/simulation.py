@@ -65,13 +65,8 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
     method = NONLINEAR_METHODS[scene["solver"]["method"]]
     if scene["solver"]["hessian"] == "shift":
         layer = layer | {"mat_mumps_icntl_13": "1"}  # exact inertia from MUMPS in parallel
-    forcing = scene["solver"]["forcing"]
-    if forcing != "tight" and scene["solver"]["method"] not in ("newton", "trust_region"):
-        raise FemAnimError(f"solver.forcing = {forcing!r} sets the Krylov tolerance of Newton's "
-                           f"linear solves; solver.method = {scene['solver']['method']!r} has "
-                           "none (use 'newton' or 'trust_region')")
-    try:
-        forcing = forcing_options(forcing, merge_options(layer, above))
+    try:  # the scene checked the method; the preset may come from the command line
+        forcing = forcing_options(scene["solver"]["forcing"], merge_options(layer, above))
     except ValueError as err:
         raise FemAnimError(str(err)) from None
     return merge_options(NEWTON_DEFAULTS, method, layer, forcing, above)

@@ -214,6 +214,8 @@ CORPUS = [
         '[element]\ndegree = 2\n[material]\nmass = "lumped"\n'),
     Bad("hessian-lbfgs", ('solver.hessian = "shift"', 'solver.method = "lbfgs" uses none'),
         '[solver]\nmethod = "lbfgs"\nhessian = "shift"\n'),
+    Bad("forcing-lbfgs", ("solver.forcing = 'adaptive'", "solver.method = 'lbfgs' has none"),
+        '[solver]\nmethod = "lbfgs"\nforcing = "adaptive"\n'),
     Bad("min-dt-over-dt", ("time.min_dt must not exceed time.dt = 0.01, got 0.1",),
         "[time]\ndt = 0.01\nmin_dt = 0.1\n"),
     Bad("pin-min-over-max", ("pin[0] (clamp) is an empty box", "min [0.5, 0, 0] exceeds max"),
