@@ -4,7 +4,7 @@
 meshio's TimeSeriesReader, ``stats.csv``), fixes the colour range and the camera over the
 whole run (the field's range over all frames, the box around all deformed positions), so
 neither colours nor framing jump between frames, renders every frame with one
-:class:`~fem_anim.render.FrameRenderer` and writes
+:class:`~fem_anim.frame_renderer.FrameRenderer` and writes
 
 * ``frames/frame_NNNN.png`` (one per trajectory frame, the rest state first),
 * ``animation.gif`` (Pillow, one palette; at most 50 frames per second, since GIF delays are whole
@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FemAnimError
+from .frame_renderer import FrameRenderer
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
            "render_directory", "REQUIRED_FILES", "MAX_GIF_FPS"]
@@ -181,8 +182,6 @@ def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str) -> 
     """Frames, GIF, MP4 and final.png into ``staging``, one renderer for all frames."""
     import imageio.v3 as iio
     import imageio_ffmpeg
-
-    from .render import FrameRenderer
 
     values = frame_values(run, settings["color_by"])
     clim = (min(0.0, float(values.min())), float(values.max()))

@@ -16,10 +16,10 @@ can cause ends with one line ``fem-anim: error: ...`` on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 from pathlib import Path
 
+from .console import print_error, quiet_jit_logging
 from .errors import ConvergenceError, FemAnimError
 from .petsc_options import init_petsc, split_petsc_args
 
@@ -58,24 +58,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _print_error(message: str) -> None:
-    from mpi4py import MPI
-
-    if MPI.COMM_WORLD.rank == 0:  # one line: control characters (a newline in a key) escaped
-        line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
-        print(f"fem-anim: error: {line}", file=sys.stderr, flush=True)
-
-
-def _quiet_jit_logging() -> None:
-    """Silence the FFCx JIT's build log on the terminal.
-
-    FFCx calls ``logging.basicConfig()``; every JIT compile runs setuptools' distutils,
-    which sets the root logger to INFO. Raising the handlers' level keeps warnings only.
-    """
-    for handler in logging.getLogger().handlers:
-        handler.setLevel(logging.WARNING)
-
-
 def _run(args, cli_options: dict[str, str]) -> int:
     from mpi4py import MPI
 
@@ -89,7 +71,7 @@ def _run(args, cli_options: dict[str, str]) -> int:
 
     from .energy import describe_energy, energy_report, initial_energies, write_summary
 
-    _quiet_jit_logging()
+    quiet_jit_logging()
     sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
     initial = initial_energies(sim)
     try:
@@ -166,10 +148,10 @@ def main(argv: list[str] | None = None) -> int:
             return _render(args)
         return _run(args, solver_options)
     except FemAnimError as err:
-        _print_error(str(err))
+        print_error(str(err))
         return EXIT_USAGE
     except KeyboardInterrupt:
-        _print_error("interrupted")
+        print_error("interrupted")
         return 130
 
 

@@ -1,24 +1,41 @@
 """The one place that knows which DOLFINx release is installed.
 
-Written against Debian's DOLFINx 0.5.2. Names that changed in later releases are
-wrapped here, so moving to a newer DOLFINx is a change to this file only:
+fem_anim runs on Debian's DOLFINx 0.5.2 (Debian 12: UFL 2022.2, FFCx/basix 0.5, PETSc 3.18)
+and 0.9.0 (Debian 13: UFL 2024.2, FFCx/basix 0.9, PETSc 3.22). Every name that differs
+between them is wrapped here, in the package and in the tests alike
+(``tests/test_compat_seam.py`` fails when one appears elsewhere):
 
-=======================================  ==========================================
-0.5.2 (here)                             later releases
-=======================================  ==========================================
-``fem.VectorFunctionSpace(mesh, el)``    ``fem.functionspace(mesh, element(...))``
-``fem.FunctionSpace(mesh, el)``          ``fem.functionspace``
-``u.vector``                             ``u.x.petsc_vec``
-``mesh.geometry.dofmap`` (adjacency)     ``mesh.geometry.dofmap`` (2D array)
-``Quadrature`` ufl element                basix quadrature element (0.7)
-``mesh.create_mesh(comm, cells, x, d)``  ``d`` became a basix/ufl element (0.8)
-``geometry.BoundingBoxTree(mesh, d)``    ``geometry.bb_tree(mesh, d)`` (0.7)
-``fem.FormMetaClass``, ``jit.ffcx_jit``   ``fem.Form``, ``form_cpp_class`` (0.7)
-=======================================  ==========================================
+==========================================  ==================================================
+0.5.2                                       0.9.0
+==========================================  ==================================================
+``fem.VectorFunctionSpace(mesh, el)``       ``fem.functionspace(mesh, ("Lagrange", k, (d,)))``
+``fem.FunctionSpace(mesh, ("DG", 0))``      ``fem.functionspace(mesh, ("DG", 0))``
+``ufl.TensorElement("Quadrature", ...)``    ``basix.ufl.quadrature_element(cell, shape, ...)``
+``ufl.Mesh(ufl.VectorElement(...))``        ``basix.ufl.element("Lagrange", cell, 1, shape)``
+``u.vector``                                ``u.x.petsc_vec``
+``geometry.dofmap`` / ``dofmap.list``       2D arrays (0.5: adjacency lists)
+``geometry.BoundingBoxTree(mesh, d)``       ``geometry.bb_tree(mesh, d)``
+``compute_collisions(tree, x)``             ``compute_collisions_points(tree, x)``
+``Expression(e, X, jit_params=)``           ``Expression(e, X, jit_options=)``
+``Expression.eval(cells)``                  ``Expression.eval(mesh, cells)``
+``basix.cell.string_to_type``               ``basix.CellType[name]``
+``make_quadrature(rule, cell, degree)``     ``make_quadrature(cell, degree, rule=...)``
+``ffcx.get_parameters``, ``parameters=``    ``ffcx.get_options``, ``options=``
+``fem.FormMetaClass(ufcx, V, w, c, ...)``   ``form_cpp_class(dtype)(ptr, V, w, c, ...)``; ``Form``
+``ufcx_form.original_coefficient_position`` ``original_coefficient_positions``
+``set_bc(scale=)``, ``apply_lifting(...)``  ``alpha=`` (fem_anim passes them by position)
+==========================================  ==================================================
+
+Each function below branches on :data:`LEGACY` (0.5) against the current API (0.9). A newer
+release is one more branch in the functions whose names it changes; DOLFINx 0.10, for
+example, renames ``io.gmshio`` to ``io.gmsh`` (fem_anim meshes through the gmsh API
+itself and does not use either), wraps SNES in ``fem.petsc.NonlinearProblem`` (fem_anim
+drives its own SNES) and merges the blocked assemblers (fem_anim assembles one space).
 """
 
 from __future__ import annotations
 
+import dolfinx
 import ffcx
 import ffcx.codegeneration.jit
 import numpy as np
@@ -28,102 +45,223 @@ from dolfinx import fem, geometry, jit
 from dolfinx import mesh as dmesh
 
 __all__ = [
+    "DOLFINX_VERSION",
+    "LEGACY",
+    "SUPPORTED",
     "vector_space",
     "cell_space",
     "quadrature_space",
     "petsc_vec",
     "geometry_dofmap",
+    "cell_dofs",
     "create_mesh",
     "colliding_cells",
+    "expression",
+    "evaluate",
+    "basix_cell",
+    "reference_quadrature",
     "compile_forms_together",
 ]
+
+#: (major, minor) of the DOLFINx in use.
+DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])
+#: The DOLFINx series fem_anim is written and tested against.
+SUPPORTED = ((0, 5), (0, 9))
+if DOLFINX_VERSION not in SUPPORTED:
+    raise ImportError(f"fem_anim supports DOLFINx 0.5 and 0.9 (Debian 12 and 13); "
+                      f"this is DOLFINx {dolfinx.__version__}")
+#: True on DOLFINx 0.5 (Debian 12), False on 0.9 (Debian 13).
+LEGACY: bool = DOLFINX_VERSION < (0, 9)
+
+if not LEGACY:
+    import basix.ufl
+    from dolfinx.fem import forms as _forms
 
 
 def vector_space(mesh, degree: int) -> fem.FunctionSpace:
     """Vector-valued continuous Lagrange space of the given degree."""
-    return fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+    if LEGACY:
+        return fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+    return fem.functionspace(mesh, ("Lagrange", degree, (mesh.geometry.dim,)))
 
 
 def cell_space(mesh) -> fem.FunctionSpace:
     """Piecewise-constant scalars: one value per cell (DG0)."""
-    return fem.FunctionSpace(mesh, ("DG", 0))
+    if LEGACY:
+        return fem.FunctionSpace(mesh, ("DG", 0))
+    return fem.functionspace(mesh, ("DG", 0))
 
 
 def quadrature_space(mesh, degree: int, shape: tuple[int, ...] = ()) -> fem.FunctionSpace:
     """Quadrature-point data space of the default scheme at ``degree``."""
-    cell = mesh.ufl_cell()
-    if shape:
-        element = ufl.TensorElement("Quadrature", cell, degree, shape=shape,
-                                    quad_scheme="default")
-    else:
-        element = ufl.FiniteElement("Quadrature", cell, degree, quad_scheme="default")
-    return fem.FunctionSpace(mesh, element)
+    if LEGACY:
+        cell = mesh.ufl_cell()
+        if shape:
+            element = ufl.TensorElement("Quadrature", cell, degree, shape=shape,
+                                        quad_scheme="default")
+        else:
+            element = ufl.FiniteElement("Quadrature", cell, degree, quad_scheme="default")
+        return fem.FunctionSpace(mesh, element)
+    element = basix.ufl.quadrature_element(mesh.topology.cell_name(), value_shape=tuple(shape),
+                                           scheme="default", degree=degree)
+    return fem.functionspace(mesh, element)
 
 
 def petsc_vec(u: fem.Function):
     """The PETSc vector that holds a Function's degrees of freedom."""
-    return u.vector
-
+    return u.vector if LEGACY else u.x.petsc_vec
 
 
 def geometry_dofmap(mesh) -> np.ndarray:
-    """Cell -> geometry node indices as a (num_cells, nodes_per_cell) array."""
+    """Cell -> geometry node indices as a (num_cells, nodes_per_cell) array (ghosts included)."""
     dofmap = mesh.geometry.dofmap
-    num_cells = mesh.topology.index_map(mesh.topology.dim).size_local + \
-        mesh.topology.index_map(mesh.topology.dim).num_ghosts
-    return dofmap.array.reshape(num_cells, -1)
+    if LEGACY:
+        return dofmap.array.reshape(dofmap.num_nodes, -1)
+    return dofmap
+
+
+def cell_dofs(V: fem.FunctionSpace) -> np.ndarray:
+    """Cell -> dof (block) indices of a space as a (num_cells, dofs_per_cell) array."""
+    dofmap = V.dofmap.list
+    if LEGACY:
+        return dofmap.array.reshape(dofmap.num_nodes, -1)
+    return dofmap
 
 
 def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: str):
     """Distribute a P1 simplex mesh given on one rank (other ranks pass empty arrays)."""
-    domain = ufl.Mesh(ufl.VectorElement("Lagrange", ufl.Cell(cell_name, geometric_dimension=gdim),
-                                        1))
+    if LEGACY:
+        domain = ufl.Mesh(ufl.VectorElement(
+            "Lagrange", ufl.Cell(cell_name, geometric_dimension=gdim), 1))
+    else:
+        domain = ufl.Mesh(basix.ufl.element("Lagrange", cell_name, 1, shape=(gdim,)))
     return dmesh.create_mesh(comm, cells, x, domain)
-
-
 
 
 def colliding_cells(mesh, points: np.ndarray):
     """Local cells containing each of ``points`` (n, 3): an adjacency list point -> cells."""
-    tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
-    candidates = geometry.compute_collisions(tree, points)
+    if LEGACY:
+        tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
+        candidates = geometry.compute_collisions(tree, points)
+    else:
+        tree = geometry.bb_tree(mesh, mesh.topology.dim)
+        candidates = geometry.compute_collisions_points(tree, points)
     return geometry.compute_colliding_cells(mesh, candidates, points)
 
 
-def compile_forms_together(forms: dict[str, ufl.Form],
-                           jit_params: dict) -> dict[str, fem.FormMetaClass]:
+def expression(expr, points: np.ndarray, jit_options: dict | None = None) -> fem.Expression:
+    """A compiled UFL expression at reference ``points`` (evaluate it with :func:`evaluate`)."""
+    if LEGACY:
+        return fem.Expression(expr, points, jit_params=jit_options)
+    return fem.Expression(expr, points, jit_options=jit_options)
+
+
+def evaluate(expr: fem.Expression, mesh, cells: np.ndarray) -> np.ndarray:
+    """Values of a compiled expression on local ``cells``: (num_cells, points * value_size)."""
+    values = expr.eval(cells) if LEGACY else expr.eval(mesh, cells)
+    return values.reshape(len(cells), -1)
+
+
+def basix_cell(name: str):
+    """basix's cell type of a cell name (``"interval"``, ``"triangle"``, ``"tetrahedron"``)."""
+    import basix
+
+    if LEGACY:
+        return basix.cell.string_to_type(name)
+    return basix.CellType[name]
+
+
+def reference_quadrature(cell_name: str, degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points and weights of basix's default rule of ``degree`` on a reference cell.
+
+    This is the rule FFCx uses for ``quadrature_degree`` with the default scheme.
+    """
+    import basix
+
+    cell = basix_cell(cell_name)
+    if LEGACY:
+        return basix.make_quadrature(basix.quadrature.string_to_type("default"), cell, degree)
+    return basix.make_quadrature(cell, degree)
+
+
+def compile_forms_together(forms: dict[str, ufl.Form], jit_options: dict) -> dict:
     """Compile several real-valued forms on one mesh into one FFCx module (one gcc run).
 
     ``fem.form`` compiles every form into its own C module; the forms of one problem
     compiled together take about half the time (9 forms of the default scene: 3.0 s
     against 5.8 s with a cold cache). Under MPI rank 0 compiles and the others then load
     the module from the cache (DOLFINx's ``mpi_jit_decorator``). The Forms built are the
-    ones ``fem.form`` builds (same coefficients, constants, subdomain data).
+    ones ``fem.form`` builds (same coefficients, constants, subdomain data), so they go to
+    the ``fem.petsc`` assemblers like any other.
     """
     ufl_forms = list(forms.values())
     mesh = ufl_forms[0].ufl_domain().ufl_cargo()
-    p_ffcx = ffcx.get_parameters({"scalar_type": "double"})
-    p_jit = jit.get_parameters(jit_params)
+    if LEGACY:
+        p_ffcx = ffcx.get_parameters({"scalar_type": "double"})
+        p_jit = jit.get_parameters(jit_options)
 
-    @jit.mpi_jit_decorator
-    def compile_all():
-        return ffcx.codegeneration.jit.compile_forms(ufl_forms, parameters=p_ffcx, **p_jit)
+        @jit.mpi_jit_decorator
+        def compile_all():
+            return ffcx.codegeneration.jit.compile_forms(ufl_forms, parameters=p_ffcx, **p_jit)
+    else:
+        p_ffcx = ffcx.get_options({"scalar_type": np.float64})
+        p_jit = jit.get_options(jit_options)
+
+        @jit.mpi_jit_decorator
+        def compile_all():
+            return ffcx.codegeneration.jit.compile_forms(ufl_forms, options=p_ffcx, **p_jit)
 
     compiled, module, code = compile_all(mesh.comm)
+    build = _legacy_form if LEGACY else _current_form
+    return {name: build(form, ufcx_form, module, code, mesh)
+            for name, form, ufcx_form in zip(forms, ufl_forms, compiled)}
+
+
+def _coefficients(form: ufl.Form, ufcx_form, positions: str) -> list:
+    original = form.coefficients()
+    where = getattr(ufcx_form, positions)
+    return [original[where[i]]._cpp_object for i in range(ufcx_form.num_coefficients)]
+
+
+def _legacy_form(form: ufl.Form, ufcx_form, module, code, mesh):
+    """A 0.5 ``fem.FormMetaClass`` Form from one ufcx form of a jointly compiled module."""
+    subdomains, = form.subdomain_data().values()
+    spaces = [arg.ufl_function_space()._cpp_object for arg in form.arguments()]
+    coefficients = _coefficients(form, ufcx_form, "original_coefficient_position")
+    constants = [c._cpp_object for c in form.constants()]
+    types = _cpp.fem.IntegralType
+    markers = {types.cell: subdomains.get("cell"),
+               types.exterior_facet: subdomains.get("exterior_facet"),
+               types.interior_facet: subdomains.get("interior_facet"),
+               types.vertex: subdomains.get("vertex")}
     formcls = type("Form", (fem.FormMetaClass, _cpp.fem.Form_float64), {})
-    out = {}
-    for name, form, ufcx_form in zip(forms, ufl_forms, compiled):
-        subdomains, = form.subdomain_data().values()
-        spaces = [arg.ufl_function_space()._cpp_object for arg in form.arguments()]
-        original = form.coefficients()
-        coefficients = [original[ufcx_form.original_coefficient_position[i]]._cpp_object
-                        for i in range(ufcx_form.num_coefficients)]
-        constants = [c._cpp_object for c in form.constants()]
-        types = _cpp.fem.IntegralType
-        markers = {types.cell: subdomains.get("cell"),
-                   types.exterior_facet: subdomains.get("exterior_facet"),
-                   types.interior_facet: subdomains.get("interior_facet"),
-                   types.vertex: subdomains.get("vertex")}
-        out[name] = formcls(ufcx_form, spaces, coefficients, constants, markers, mesh,
-                            module.ffi, code)
-    return out
+    return formcls(ufcx_form, spaces, coefficients, constants, markers, mesh, module.ffi, code)
+
+
+def _current_form(form: ufl.Form, ufcx_form, module, code, mesh):
+    """A 0.9 ``fem.Form`` from one ufcx form of a jointly compiled module.
+
+    ``mesh`` is the UFL domain's cargo, which in 0.9 is the C++ mesh. The same steps as the nested ``_form`` of ``dolfinx.fem.form`` (0.9.0): subdomain ids
+    per integral type, their integration entities, then the C++ form.
+    """
+    domain, = form.subdomain_data().keys()
+    data = form.subdomain_data()[domain]
+    spaces = [arg.ufl_function_space()._cpp_object for arg in form.arguments()]
+    coefficients = _coefficients(form, ufcx_form, "original_coefficient_positions")
+    constants = [c._cpp_object for c in form.constants()]
+    ids: dict[str, list] = {kind: [] for kind in data}
+    for integral in form.integrals():
+        if integral.subdomain_data() is None:
+            continue
+        sid = integral.subdomain_id()
+        if sid == "everywhere":
+            continue
+        ids[integral.integral_type()].extend(
+            [s for s in sid if s != "everywhere"] if isinstance(sid, tuple) else [sid])
+    to_dolfinx = _forms._ufl_to_dolfinx_domain
+    subdomains = {to_dolfinx[kind]: _forms.get_integration_domains(
+        to_dolfinx[kind], values[0], sorted(ids[kind])) for kind, values in data.items()}
+    cpp_form = _forms.form_cpp_class(np.float64)(
+        module.ffi.cast("uintptr_t", module.ffi.addressof(ufcx_form)), spaces, coefficients,
+        constants, subdomains, {}, mesh)
+    return fem.Form(cpp_form, ufcx_form, code, module)

@@ -50,14 +50,15 @@ def contact_quadrature(degree: int, tdim: int) -> tuple[np.ndarray, dict]:
     cell's vertices instead of the facet's for a facet integral, so the rule is passed
     as a custom one. P2: basix's default (symmetric) rule of degree 2.
     """
-    facet = basix.cell.string_to_type({2: "interval", 3: "triangle"}[tdim])
+    facet_name = {2: "interval", 3: "triangle"}[tdim]
+    facet = compat.basix_cell(facet_name)
     if degree == 1:
         points = basix.geometry(facet)
         weights = np.full(tdim, 1.0 / math.factorial(tdim - 1) / tdim)
         return points, {"quadrature_rule": "custom", "quadrature_degree": 1,
                         "quadrature_points": tuple(map(tuple, points.tolist())),
                         "quadrature_weights": tuple(weights.tolist())}
-    points, _ = basix.make_quadrature(basix.quadrature.string_to_type("default"), facet, 2)
+    points, _ = compat.reference_quadrature(facet_name, 2)
     return points, {"quadrature_rule": "default", "quadrature_degree": 2}
 
 
@@ -178,7 +179,7 @@ class ObstacleContact:
         self.cells = self.cells.astype(np.int32)
         self.facet_row, self.facet_local = inverse, local
 
-        cell = basix.cell.string_to_type(mesh.topology.cell_name())
+        cell = compat.basix_cell(mesh.topology.cell_name())
         geometry = basix.geometry(cell)
         mapped = []
         for vertices in basix.topology(cell)[tdim - 1]:  # FFCx's map_facet_points
@@ -188,14 +189,15 @@ class ObstacleContact:
         g = self.gdim
         x = self.X + self.u
         values = ufl.as_vector([x[i] for i in range(g)] + [self.direction[i] for i in range(g)])
-        self.expression = fem.Expression(values, np.vstack(mapped))
+        self.expression = compat.expression(values, np.vstack(mapped))
 
     def _evaluate(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions x and directions y at every local contact point, (n, gdim) each."""
         g, nq = self.gdim, self.points_per_facet
         if self.cells.size == 0:
             return np.zeros((0, g)), np.zeros((0, g))
-        values = self.expression.eval(self.cells).reshape(self.cells.size, -1, nq, 2, g)
+        values = compat.evaluate(self.expression, self.u.function_space.mesh, self.cells)
+        values = values.reshape(self.cells.size, -1, nq, 2, g)
         values = values[self.facet_row, self.facet_local].reshape(-1, 2, g)
         return values[:, 0], values[:, 1]
 

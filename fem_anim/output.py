@@ -51,7 +51,7 @@ class VertexGather:
         tdim = mesh.topology.dim
         nodes = compat.geometry_dofmap(mesh)
         num_cells = nodes.shape[0]
-        dofs = V.dofmap.list.array.reshape(num_cells, -1)[:, : tdim + 1]
+        dofs = compat.cell_dofs(V)[:num_cells, : tdim + 1]
         node_to_dof = np.empty(mesh.geometry.x.shape[0], dtype=np.int64)
         node_to_dof[nodes.ravel()] = dofs.ravel()
         self.node_to_dof = node_to_dof

@@ -24,10 +24,9 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import basix
 import numpy as np
 import ufl
-from dolfinx import fem, la
+from dolfinx import fem
 from dolfinx import mesh as dmesh
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
@@ -60,7 +59,7 @@ EVENTS = {name: PETSc.Log.Event(f"FemAnim{name.capitalize()}")
           for name in ("objective", "residual", "jacobian", "filter", "energies")}
 
 
-def compile_forms(forms: dict[str, ufl.Form]) -> dict[str, fem.FormMetaClass]:
+def compile_forms(forms: dict[str, ufl.Form]) -> dict:
     """Compile UFL forms with FFCx into one module, with cache keys that do not depend on history.
 
     UFL caches a form's signature (its JIT cache key) when first asked. Compiling one form
@@ -73,6 +72,14 @@ def compile_forms(forms: dict[str, ufl.Form]) -> dict[str, fem.FormMetaClass]:
     for form in forms.values():
         form.signature()
     return compat.compile_forms_together(forms, JIT_OPTIONS)
+
+
+def orthonormalize(vectors: list[PETSc.Vec]) -> None:
+    """Modified Gram-Schmidt on distributed PETSc vectors, in place (collective)."""
+    for i, v in enumerate(vectors):
+        for w in vectors[:i]:
+            v.axpy(-v.dot(w), w)
+        v.normalize()
 
 
 def default_quadrature_degree(degree: int) -> int:
@@ -241,7 +248,7 @@ class EnergyProblem:
         mesh = self.domain.mesh
         self.material_map = cells = assign_materials(self.scene, self.domain)
         Q = self.W0
-        cell_dofs = Q.dofmap.list.array.reshape(-1)[: cells.cell_material.size]
+        cell_dofs = compat.cell_dofs(Q).reshape(-1)[: cells.cell_material.size]
         E, nu = cells.cell_values("youngs_modulus"), cells.cell_values("poisson_ratio")
         fields = dict(zip(("mu", "lmbda"), lame_parameters(E, nu)))
         fields["rho"] = cells.cell_values("density")
@@ -267,16 +274,13 @@ class EnergyProblem:
         if needs.all():
             return None
         cells = needs[self.material_map.cell_model]
-        dofs = self.det_data.function.function_space.dofmap.list.array.reshape(
-            self.det_data.num_cells, -1)
+        dofs = compat.cell_dofs(self.det_data.function.function_space)
         return dofs[cells].ravel()
 
     def _quadrature_points(self) -> np.ndarray:
         """Reference points of the elastic quadrature rule (the rule FFCx uses)."""
         cell = self.domain.mesh.topology.cell_name()
-        points, _ = basix.make_quadrature(basix.quadrature.string_to_type("default"),
-                                          basix.cell.string_to_type(cell),
-                                          self.quadrature_degree)
+        points, _ = compat.reference_quadrature(cell, self.quadrature_degree)
         return points
 
     def _quadrature_data(self, name: str, expression, evaluate, in_shape, out_shape):
@@ -284,8 +288,8 @@ class EnergyProblem:
         Q = compat.quadrature_space(self.domain.mesh, self.quadrature_degree, out_shape)
         index_map = self.domain.mesh.topology.index_map(self.d)
         return QuadratureData(fem.Function(Q, name=name),
-                              fem.Expression(expression, self._quadrature_points(),
-                                             jit_params=JIT_OPTIONS),
+                              compat.expression(expression, self._quadrature_points(),
+                                                JIT_OPTIONS),
                               evaluate, index_map.size_local + index_map.num_ghosts, in_shape)
 
     def _psi(self, u, F=None, material=None):
@@ -434,7 +438,7 @@ class EnergyProblem:
         with b.localForm() as b_local:
             b_local.set(0.0)
         fem_petsc.assemble_vector(b, self.residual_form)
-        fem_petsc.apply_lifting(b, [self.jacobian_form], bcs=[self.bcs], x0=[x], scale=-1.0)
+        fem_petsc.apply_lifting(b, [self.jacobian_form], [self.bcs], [x], -1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fem_petsc.set_bc(b, self.bcs, x, -1.0)
         EVENTS["residual"].end()
@@ -491,7 +495,7 @@ class EnergyProblem:
             v = self.create_vector()
             v.array[:] = mode.ravel()
             vectors.append(v)
-        la.orthonormalize(vectors)
+        orthonormalize(vectors)
         return PETSc.NullSpace().create(vectors=vectors, comm=self.comm)
 
     def create_vector(self) -> PETSc.Vec:
@@ -523,7 +527,7 @@ class EnergyProblem:
         self.u.x.array[:] = u
         self.update_quadrature_data()
         num_owned = self.domain.mesh.topology.index_map(self.d).size_local
-        cell_dofs = self.W0.dofmap.list.array[:num_owned]
+        cell_dofs = compat.cell_dofs(self.W0)[:num_owned, 0]
         if self._cell_volumes is None:
             mesh = self.domain.mesh
             self._cell_volumes = np.abs(cell_volumes(

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from dolfinx import fem
 
+from . import compat
+
 __all__ = ["QuadratureData"]
 
 
@@ -37,9 +39,10 @@ class QuadratureData:
     def update(self) -> None:
         """Evaluate the expression on every local cell and store its numpy map."""
         cells = np.arange(self.num_cells, dtype=np.int32)
-        values = self.expression.eval(cells).reshape(-1, *self.value_shape)
+        mesh = self.function.function_space.mesh
+        values = compat.evaluate(self.expression, mesh, cells).reshape(-1, *self.value_shape)
         values = self.evaluate(values).reshape(self.num_cells, -1)
-        dofs = self.function.function_space.dofmap.list.array.reshape(self.num_cells, -1)
+        dofs = compat.cell_dofs(self.function.function_space)[: self.num_cells]
         bs = self.function.function_space.dofmap.bs
         target = self.function.x.array.reshape(-1, bs)
         target[dofs.ravel()] = values.reshape(-1, bs)

@@ -17,6 +17,7 @@ empty, settings are compatible) are checked after each key's own, in
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import re
@@ -97,6 +98,23 @@ def _scene_name(v) -> str | None:
         "or '-'; at most 100 characters), since it names the output directory out/<name>")
 
 
+def symlink_loops(path: Path) -> bool:
+    """Whether ``path`` or one of its parents is a symbolic link that never resolves.
+
+    ``Path.resolve()`` raised on a loop up to Python 3.12 and returns the path as it stands
+    from 3.13 on, so the loop is found by asking the OS: ``stat`` of a link in a loop fails
+    with ELOOP on every Python.
+    """
+    for prefix in (path, *path.parents):
+        if prefix.is_symlink():
+            try:
+                os.stat(prefix)
+            except OSError as err:
+                if err.errno == errno.ELOOP:
+                    return True
+    return False
+
+
 def _output_directory(v) -> str | None:
     """A scene may only write below the working directory (``-o`` may write anywhere)."""
     if not v or os.path.isabs(v) or v.startswith("~"):
@@ -106,9 +124,11 @@ def _output_directory(v) -> str | None:
         return "must not leave the working directory (a scene cannot make the program " \
                "write outside its output directory; use -o)"
     cwd = Path.cwd().resolve()
+    if symlink_loops(cwd / v):
+        return "must be a path that resolves (a symbolic link loops)"
     try:
         inside = (cwd / v).resolve().is_relative_to(cwd)
-    except (OSError, RuntimeError):  # a symbolic link loop
+    except (OSError, RuntimeError):  # a loop, on Pythons before 3.13 (3.13 does not raise)
         return "must be a path that resolves (a symbolic link loops)"
     if not inside:  # through a symbolic link
         return "must not leave the working directory (it resolves outside it through a " \

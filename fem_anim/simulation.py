@@ -141,7 +141,7 @@ class Simulation:
             f_damp.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
             f.axpy(-1.0, f_damp)
             f_damp.destroy()
-        fem_petsc.set_bc(f, p.bcs, scale=0.0)
+        fem_petsc.set_bc(f, p.bcs, None, 0.0)
         M = fem_petsc.assemble_matrix(p.mass_form, p.bcs)
         M.assemble()
         ksp = PETSc.KSP().create(self.comm)

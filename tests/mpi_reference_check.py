@@ -42,7 +42,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem_anim import reference
+from fem_anim import compat, reference
 from fem_anim.mesh import mesh_from_arrays
 from fem_anim.output import VertexGather
 from fem_anim.problem import EnergyProblem
@@ -139,7 +139,7 @@ class Distributed:
 
     def set_positions(self, x: np.ndarray) -> None:
         """``u = x - X`` through the solver entry point (ghosts, quadrature data)."""
-        work = self.problem.u.vector.copy()
+        work = compat.petsc_vec(self.problem.u).copy()
         with work.localForm() as local:
             local.array[:] = self.map.scatter(x - self.beam.X)
         self.problem.set_state(work)
@@ -161,7 +161,8 @@ class Distributed:
         """``A z`` for each global ``z``, the matrix assembled and applied across the ranks."""
         A = fem_petsc.assemble_matrix(form)
         A.assemble()
-        z, y = self.problem.u.vector.duplicate(), self.problem.u.vector.duplicate()
+        work = compat.petsc_vec(self.problem.u)
+        z, y = work.duplicate(), work.duplicate()
         out = []
         for values in probes:
             with z.localForm() as local:
@@ -310,7 +311,7 @@ def compare_trajectory(report: Report, beam: Beam, directory: Path, material: st
 
 def check_partition(report: Report, beam: Beam) -> None:
     """Every rank owns part of the mesh and some dofs are shared (else nothing is tested)."""
-    V_map = fem.VectorFunctionSpace(beam.domain.mesh, ("Lagrange", 1)).dofmap.index_map
+    V_map = compat.vector_space(beam.domain.mesh, 1).dofmap.index_map
     owned = COMM.gather(V_map.size_local, root=0)
     ghosts = COMM.gather(V_map.num_ghosts, root=0)
     if COMM.rank == 0:  # a serial run (for debugging) has nothing to distribute

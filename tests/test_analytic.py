@@ -68,7 +68,7 @@ from petsc4py import PETSc
 from scenes import POISSON_RATIO, YOUNGS_MODULUS, beam, make_scene
 from test_reference_comparison import rotation
 
-from fem_anim import reference
+from fem_anim import compat, reference
 from fem_anim.mesh import mesh_from_arrays
 from fem_anim.problem import EnergyProblem
 from fem_anim.simulation import Simulation
@@ -130,7 +130,7 @@ def assembled_vector(form) -> np.ndarray:
 
 def set_displacement(problem, u: np.ndarray) -> None:
     """``u`` through the solver entry point (ghosts and quadrature data refreshed)."""
-    work = problem.u.vector.copy()
+    work = compat.petsc_vec(problem.u).copy()
     with work.localForm() as local:
         local.array[:] = u
     problem.set_state(work)

@@ -34,7 +34,7 @@ from test_cli import read_stats
 from scenes import make_scene
 from test_reference_comparison import Comparison
 
-from fem_anim import reference
+from fem_anim import compat, reference
 from fem_anim.contact import KEEP_FRACTION
 from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
@@ -153,13 +153,13 @@ def test_step_bound_stops_at_keep_fraction(tmp_path, kind):
     x = near_contact_positions(c.points, seed=6)
     c.set_positions(x)
     before = np.array(p.contact._distances(p.contact._evaluate()[0])[0])
-    y = p.u.vector.copy()
+    y = compat.petsc_vec(p.u).copy()
     with y.localForm() as local:  # a rigid translation down by 10 cm: crosses everything
         local.array[:] = 0.0
         local.array[c.order[2::3]] = 0.1
     alpha = p.contact.step_bound(y)
     assert 0 < alpha < 1
-    trial = p.u.vector.copy()
+    trial = compat.petsc_vec(p.u).copy()
     trial.axpy(-alpha, y)
     p.set_state(trial)
     after = np.array(p.contact._distances(p.contact._evaluate()[0])[0])

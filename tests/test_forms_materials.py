@@ -16,6 +16,7 @@ import pytest
 import ufl
 from mpi4py import MPI
 
+from fem_anim import compat
 from fem_anim.forms import corotated, kinematics, lame, material, stable_neohookean
 
 MU, LMBDA = 1.3, 2.7
@@ -31,13 +32,18 @@ def one_cell_mesh(d: int) -> dolfinx.mesh.Mesh:
     cell = {2: "triangle", 3: "tetrahedron"}[d]
     x = np.vstack([np.zeros(d), np.eye(d)])
     cells = np.arange(d + 1, dtype=np.int64).reshape(1, -1)
-    domain = ufl.Mesh(ufl.VectorElement("Lagrange", cell, 1))
-    return dolfinx.mesh.create_mesh(MPI.COMM_SELF, cells, x, domain)
+    return compat.create_mesh(MPI.COMM_SELF, cells, x, d, cell)
 
 
-def eval_at_point(expr: ufl.core.expr.Expr, d: int) -> np.ndarray:
+def eval_at_point(expr: ufl.core.expr.Expr, mesh: dolfinx.mesh.Mesh) -> np.ndarray:
+    d = mesh.topology.dim
     X = np.full((1, d), 1.0 / (d + 1))
-    return dolfinx.fem.Expression(expr, X).eval(np.array([0], dtype=np.int32))[0]
+    return at_cell_zero(compat.expression(expr, X), mesh)
+
+
+def at_cell_zero(expression, mesh) -> np.ndarray:
+    """A compiled expression's values on cell 0 of a one-cell mesh."""
+    return compat.evaluate(expression, mesh, np.array([0], dtype=np.int32))[0]
 
 
 def flat(T: ufl.core.expr.Expr) -> list[ufl.core.expr.Expr]:
@@ -62,7 +68,8 @@ class Evaluator:
         P = ufl.diff(psi, Fv)
         A = ufl.diff(P, Fv)
         X = np.full((1, d), 1.0 / (d + 1))
-        self.expr = dolfinx.fem.Expression(ufl.as_vector([psi] + flat(P) + flat(A)), X)
+        self.mesh = mesh
+        self.expr = compat.expression(ufl.as_vector([psi] + flat(P) + flat(A)), X)
 
     def __call__(self, F: np.ndarray, **fixed: np.ndarray):
         """Evaluate at ``F``; extra data is recomputed from ``F`` unless given in ``fixed``."""
@@ -70,7 +77,7 @@ class Evaluator:
         for key, const in self.extra.items():
             value = fixed.get(key)
             const.value = material.EXTRA_DATA[key].evaluate(F[None])[0] if value is None else value
-        v = self.expr.eval(np.array([0], dtype=np.int32))[0]
+        v = at_cell_zero(self.expr, self.mesh)
         d = self.d
         return v[0], v[1 : 1 + d**2].reshape(d, d), v[1 + d**2 :].reshape(d, d, d, d)
 
@@ -168,7 +175,7 @@ def test_lame_parameters():
     assert lmbda + 2 / 3 * mu == pytest.approx(1e5 / (3 * (1 - 0.6)))  # bulk modulus
     mesh = one_cell_mesh(2)
     E, nu = dolfinx.fem.Constant(mesh, 1e5), dolfinx.fem.Constant(mesh, 0.3)
-    values = eval_at_point(ufl.as_vector(lame.lame_parameters(E, nu)), 2)
+    values = eval_at_point(ufl.as_vector(lame.lame_parameters(E, nu)), mesh)
     np.testing.assert_allclose(values, [mu, lmbda], rtol=1e-14)
 
 
@@ -180,12 +187,12 @@ def test_stable_neohookean_remap():
 
 def test_deformation_gradient():
     mesh = one_cell_mesh(3)
-    V = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+    V = compat.vector_space(mesh, 1)
     G = np.array([[0.1, 0.2, 0.0], [0.0, -0.3, 0.4], [0.5, 0.0, 0.2]])
     u = dolfinx.fem.Function(V)
     u.interpolate(lambda x: G @ x)
     F = kinematics.deformation_gradient(u)
-    values = eval_at_point(ufl.as_vector(flat(F) + flat(kinematics.green_strain(F))), 3)
+    values = eval_at_point(ufl.as_vector(flat(F) + flat(kinematics.green_strain(F))), mesh)
     Fn = np.eye(3) + G
     np.testing.assert_allclose(values[:9].reshape(3, 3), Fn, atol=1e-14)
     np.testing.assert_allclose(values[9:].reshape(3, 3), (Fn.T @ Fn - np.eye(3)) / 2, atol=1e-14)
@@ -322,14 +329,14 @@ def test_chebyshev_correction_is_second_order_exact():
     ds = ufl.diff(s, Fv)
     d2s_newton = ufl.diff(ufl.diff(s0 - f / df, Fv), Fv)
     comps = [s] + flat(ds) + flat(ufl.diff(ds, Fv)) + flat(d2s_newton)
-    expr = dolfinx.fem.Expression(ufl.as_vector(comps), np.full((1, 3), 0.25))
+    expr = compat.expression(ufl.as_vector(comps), np.full((1, 3), 0.25))
 
     def stretch(F):
         return corotated.stretch_trace(F[None])[0]
 
     for F in corotated_states(3):
         Fc.value, s0.value = F, stretch(F)
-        v = expr.eval(np.array([0], dtype=np.int32))[0]
+        v = at_cell_zero(expr, mesh)
         hess_fd = fd_gradient(lambda G: corotated.polar_rotation(G[None])[0], F)
         assert v[0] == pytest.approx(stretch(F), rel=1e-14)
         np.testing.assert_allclose(v[1:10].reshape(3, 3), corotated.polar_rotation(F[None])[0],

@@ -38,7 +38,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from scenes import DENSITY, DIVISIONS, LENGTHS, POISSON_RATIO, YOUNGS_MODULUS, beam, make_scene
 
-from fem_anim import reference
+from fem_anim import compat, reference
 from fem_anim.mesh import mesh_from_arrays
 from fem_anim.output import VertexGather
 from fem_anim.problem import EnergyProblem
@@ -137,7 +137,7 @@ class Comparison:
 
     def set_positions(self, x: np.ndarray) -> None:
         """``u = x - X`` through the solver entry point (refreshes quadrature data)."""
-        work = self.problem.u.vector.copy()
+        work = compat.petsc_vec(self.problem.u).copy()
         with work.localForm() as local:
             local.array[self.order] = x - self.X
         self.problem.set_state(work)
@@ -345,9 +345,9 @@ def compare_trajectory(scene_dir, d: int, material: str, integrator: str,
     pinned = pinned_mask(points, d)
 
     # Both sides pin the same dofs: set_bc zeroes exactly the pinned entries.
-    free = sim.problem.u.vector.duplicate()
+    free = compat.petsc_vec(sim.problem.u).duplicate()
     free.set(1.0)
-    fem_petsc.set_bc(free, sim.problem.bcs, scale=0.0)
+    fem_petsc.set_bc(free, sim.problem.bcs, None, 0.0)
     with free.localForm() as local:
         dolfinx_pinned = local.array[reference_order(domain, sim.problem.V)] == 0.0
     free.destroy()

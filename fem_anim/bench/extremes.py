@@ -333,7 +333,7 @@ def main(argv: list[str]) -> int:
     """
     from mpi4py import MPI
 
-    from ..cli import _print_error, _quiet_jit_logging
+    from ..console import print_error, quiet_jit_logging
 
     parser = argparse.ArgumentParser(prog="fem-anim bench --extremes")
     parser.add_argument("--full", action="store_true", help="the 3D grid (minutes)")
@@ -341,9 +341,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     args, unknown = parser.parse_known_args(argv)
     if unknown:
-        _print_error(f"bench --extremes: unrecognized arguments: {' '.join(unknown)}")
+        print_error(f"bench --extremes: unrecognized arguments: {' '.join(unknown)}")
         return 2
-    _quiet_jit_logging()
+    quiet_jit_logging()
     try:
         results = []
         for case in cases(args.full):
@@ -353,7 +353,7 @@ def main(argv: list[str]) -> int:
                       f"({results[-1][1].seconds:.1f} s)", file=sys.stderr, flush=True)
         locking = locking_rows(args.full)
     except FemAnimError as err:
-        _print_error(str(err))
+        print_error(str(err))
         return 2
     table = format_table(results, locking, args.full)
     if MPI.COMM_WORLD.rank == 0:

@@ -201,7 +201,7 @@ def _load() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..cli import _print_error
+    from ..console import print_error
     from ..petsc_options import init_petsc
 
     init_petsc([])
@@ -229,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
         print(peer_table(args.scene, args.overrides, out, sizes=sizes, steps=args.steps))
         return 0
     except FemAnimError as err:
-        _print_error(str(err))
+        print_error(str(err))
         return 2
 
 

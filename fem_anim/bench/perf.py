@@ -205,7 +205,7 @@ def _sections(args, petsc, rows, out: Path, log) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (2 with one error line for bad input)."""
-    from ..cli import _print_error
+    from ..console import print_error
     from ..petsc_options import init_petsc, split_petsc_args
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -239,10 +239,10 @@ def main(argv: list[str] | None = None) -> int:
         log(f"wrote {out}/perf.csv, perf.md, perf.png")
         return 0
     except FemAnimError as err:
-        _print_error(str(err))
+        print_error(str(err))
         return 2
     except KeyboardInterrupt:
-        _print_error("interrupted")
+        print_error("interrupted")
         return 130
 
 

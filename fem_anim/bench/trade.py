@@ -120,11 +120,11 @@ def _study(args) -> int:
     if (error := comm.bcast(error, root=0)):
         raise FemAnimError(error)
 
-    from ..cli import _quiet_jit_logging
+    from ..console import quiet_jit_logging
     from ..mesh import build_mesh
     from .measure import measure_configuration, median_run
 
-    _quiet_jit_logging()
+    quiet_jit_logging()
     ref_scene = study.reference.scene
     domain = build_mesh(comm, ref_scene)
     points = comm.bcast(domain.points if comm.rank == 0 else None, root=0)
@@ -214,12 +214,12 @@ def _write_outputs(out, study, rows, keys, points, probe, ref) -> None:
 
 def main(argv: list[str]) -> int:
     """Run the trade study; returns the exit code (2 and one line for bad input)."""
-    from ..cli import _print_error
+    from ..console import print_error
 
     try:
         args = build_parser().parse_args(argv)
         args.argv = list(argv)
         return _study(args)
     except (FemAnimError, SceneError) as err:
-        _print_error(str(err))
+        print_error(str(err))
         return 2
