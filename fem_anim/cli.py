@@ -70,6 +70,7 @@ def _run(args, cli_options: dict[str, str]) -> int:
     from .simulation import Simulation
 
     from .energy import describe_energy, energy_report, initial_energies, write_summary
+    from .provenance import software_versions
 
     quiet_jit_logging()
     sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
@@ -82,7 +83,10 @@ def _run(args, cli_options: dict[str, str]) -> int:
                                "solver options)") from None
     report = energy_report(result.rows, initial, scene)
     if MPI.COMM_WORLD.rank == 0:
-        write_summary(result.output_dir / "summary.json", scene, result.rows, report)
+        write_summary(result.output_dir / "summary.json", scene, result.rows, report,
+                      {"versions": software_versions(MPI.COMM_WORLD),
+                       "petsc_options": sim.options,
+                       "wall": sim.clock.as_dict()})
         if not args.quiet or report["damped"]:
             last = result.rows[-1]
             print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "

@@ -82,8 +82,10 @@ def describe_energy(report: dict, integrator: str) -> str:
     return base
 
 
-def write_summary(path: Path, scene, rows: list[dict], report: dict) -> None:
-    """``summary.json``: steps, final time, retries, iterations and the energy report."""
+def write_summary(path: Path, scene, rows: list[dict], report: dict,
+                  provenance: dict | None = None) -> None:
+    """``summary.json``: steps, final time, retries, iterations and the energy report, then
+    ``provenance`` (software versions, PETSc options, wall time: :mod:`fem_anim.provenance`)."""
     summary = {
         "scene": scene.name, "integrator": scene["time"]["integrator"],
         "dt": scene["time"]["dt"], "steps": len(rows),
@@ -92,5 +94,5 @@ def write_summary(path: Path, scene, rows: list[dict], report: dict) -> None:
         "newton_its": sum(r["newton_its"] for r in rows),
         "linear_its": sum(r["linear_its"] for r in rows),
         "energy": report,
-    }
+    } | (provenance or {})
     Path(path).write_text(json.dumps(summary, indent=2) + "\n")

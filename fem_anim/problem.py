@@ -224,7 +224,10 @@ class EnergyProblem:
         self.ufl_objective = objective
         self.ufl_elastic = elastic_u
         self.assembly_s = 0.0  # wall time spent assembling (objective, residual, Jacobian)
+        start = time.perf_counter()
         compiled = compile_forms(ufl_forms)
+        #: Wall time of the form compilation (FFCx + gcc, or a load from the JIT cache).
+        self.compile_s = time.perf_counter() - start
         self.objective_form = compiled["objective"]
         self.residual_form = compiled["residual"]
         self.jacobian_form = compiled["jacobian"]

@@ -33,6 +33,7 @@ from .presets import (NEWTON_DEFAULTS, drop_replaced, forcing_options, parallel_
                       preset_options)
 from .problem import EnergyProblem
 from .progress import Progress
+from .provenance import WallClock
 from .solver import NONLINEAR_METHODS, Minimiser, SolveStats
 
 __all__ = ["Simulation", "RunResult", "AdaptiveStepper", "solver_options"]
@@ -80,6 +81,7 @@ class RunResult:
     rows: list[dict]
     output_dir: Path | None
     final_displacement: np.ndarray | None  # rank 0, input vertex order
+    resumed_rows: int = 0  # rows taken over from the checkpoint of a resumed run
 
 
 class Simulation:
@@ -99,16 +101,24 @@ class Simulation:
                  domain: SimplexMesh | None = None):
         self.scene = scene
         self.comm = comm
-        options = solver_options(scene, cli_options, preset, comm.size)
+        #: Wall time per phase (summary.json's ``wall``: :mod:`fem_anim.provenance`).
+        self.clock = WallClock()
+        start = time.perf_counter()
+        #: The merged PETSc options of the step solver (summary.json's ``petsc_options``).
+        self.options = options = solver_options(scene, cli_options, preset, comm.size)
         note = parallel_note(preset or scene["solver"]["preset"], comm.size)
         if note and comm.rank == 0:
             print(f"fem-anim: {note}", file=sys.stderr)
-        self.domain = domain if domain is not None else build_mesh(comm, scene)
+        with self.clock.phase("mesh"):
+            self.domain = domain if domain is not None else build_mesh(comm, scene)
         self.problem = EnergyProblem(scene, self.domain)
         self.integrator = Integrator(scene["time"]["integrator"])
         self.minimiser = Minimiser(self.problem, options, settings=scene["solver"])
         self.gather = VertexGather(self.domain, self.problem.V)
         self.cell_gather = CellGather(self.domain)
+        self.clock.add("compile", self.problem.compile_s)
+        self.clock.add("setup", time.perf_counter() - start - self.clock.seconds["mesh"]
+                       - self.problem.compile_s)
 
     # -- state ----------------------------------------------------------------------------
     def initial_state(self) -> State:
@@ -240,6 +250,7 @@ class Simulation:
         h, steps, every = cfg["dt"], cfg["steps"], self.scene["output"]["every"]
         run_dir = RunDirectory(output_dir, self.comm, resume) if output_dir is not None \
             else None
+        start = time.perf_counter()
         try:
             result = self._loop(h, steps, every, run_dir, quiet, resume)
         except FemAnimError:
@@ -248,9 +259,15 @@ class Simulation:
             if run_dir is not None:
                 run_dir.abandon()
             raise
-        if run_dir is not None:
-            run_dir.commit()
-            if self.scene["output"]["render"]:
+        loop_s = time.perf_counter() - start
+        stepping = sum(row["step_wall_s"] for row in result.rows[result.resumed_rows:])
+        self.clock.add("stepping", stepping)
+        self.clock.add("output", loop_s - stepping)  # frames, stats, checkpoints, final files
+        with self.clock.phase("output"):
+            if run_dir is not None:
+                run_dir.commit()
+        if run_dir is not None and self.scene["output"]["render"]:
+            with self.clock.phase("render"):
                 self._render(run_dir.path, quiet)
         return result
 
@@ -280,10 +297,11 @@ class Simulation:
     def _loop(self, h, steps, every, run_dir, quiet, resume) -> RunResult:
         stepper = AdaptiveStepper(self, h, self.scene["time"])
         checkpoint_every = self.scene["output"]["checkpoint_every"] or max(1, steps // 10)
-        first, rows, kept = 1, [], None
+        first, rows, kept, resumed_rows = 1, [], None, 0
         if resume:
             ck = load_checkpoint(run_dir.file("checkpoint.npz"), self)
             state, first, rows, kept = ck.state, ck.frame + 1, ck.rows, ck.frames_written
+            resumed_rows = len(rows)
             stepper.dt, stepper.last_dt = ck.stepper["dt"], ck.stepper["last_dt"]
             if self.minimiser.shift:
                 self.minimiser.shift.c = ck.shift
@@ -320,7 +338,7 @@ class Simulation:
         if run_dir is not None:
             write_final(run_dir.file("final.vtu"), self.domain, final, energy_density)
             write_scene(run_dir.file("scene.json"), self.scene, self.comm)
-        return RunResult(state, rows, run_dir.path if run_dir else None, final)
+        return RunResult(state, rows, run_dir.path if run_dir else None, final, resumed_rows)
 
     def timed_step(self, state: State, dt: float) -> tuple[State, dict]:
         """One step and its stats row; a non-finite result counts as not converged."""

@@ -232,3 +232,36 @@ def test_2d_beam_survives_an_inverting_predictor(tmp_path):
     final = meshio.read(out / "final.vtu")
     assert list(final.cells_dict) == ["triangle"]
     assert final.point_data["displacement"][:, 1].min() < -0.5
+
+
+def test_summary_records_provenance(default_run):
+    """summary.json names the stack, the merged PETSc options and the wall time split, so
+    two runs (say on Debian 12 and 13) are compared by reading two files (issue 14)."""
+    import json
+
+    import dolfinx
+    import ffcx
+    import gmsh
+    import ufl
+    from petsc4py import PETSc
+
+    from fem_anim.simulation import solver_options
+
+    summary = json.loads((default_run / "summary.json").read_text())
+    versions = summary["versions"]
+    assert versions["dolfinx"] == dolfinx.__version__
+    assert versions["ufl"] == ufl.__version__ and versions["ffcx"] == ffcx.__version__
+    assert versions["petsc"] == ".".join(map(str, PETSc.Sys.getVersion()))
+    assert versions["gmsh"] == gmsh.__version__ and versions["mpi_ranks"] == 1
+    assert versions["mumps"] and versions["mumps"][0].isdigit()  # the default preset is MUMPS
+    assert versions["mpi"] and versions["python"].count(".") == 2
+    commit = versions["fem_anim_commit"]
+    assert commit is None or len(commit.split("+")[0]) == 40
+    assert summary["petsc_options"] == solver_options(load_scene(None, []))
+    wall = summary["wall"]
+    phases = ("compile_s", "mesh_s", "setup_s", "stepping_s", "output_s", "render_s")
+    assert all(wall[p] >= 0.0 for p in phases)
+    assert wall["total_s"] == pytest.approx(sum(wall[p] for p in phases), abs=1e-5)
+    rows = read_stats(default_run / "stats.csv")
+    assert wall["stepping_s"] == pytest.approx(sum(r["step_wall_s"] for r in rows), rel=1e-6)
+    assert wall["mesh_s"] > 0.0 and wall["render_s"] > 0.0  # the default scene renders
