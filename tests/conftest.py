@@ -42,3 +42,34 @@ def mpirun_command(n: int) -> list[str] | None:
     if os.geteuid() == 0:
         cmd.append("--allow-run-as-root")
     return cmd
+
+
+def process_tree(pid: int) -> list[int]:
+    """``pid`` and all its descendants (read from /proc), parents first."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # the process ended meanwhile
+            continue
+        children.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    tree, todo = [], [pid]
+    while todo:
+        p = todo.pop(0)
+        tree.append(p)
+        todo.extend(children.get(p, []))
+    return tree
+
+
+def kill_tree(pid: int, sig: int) -> None:
+    """Send ``sig`` to a process and every descendant.
+
+    ``os.killpg`` is not enough: OpenMPI 5's launcher puts each rank in a process group of
+    its own, so killing the launcher's group leaves the ranks running (and holding the
+    trajectory's HDF5 file lock).
+    """
+    for p in process_tree(pid):
+        try:
+            os.kill(p, sig)
+        except ProcessLookupError:
+            pass

@@ -16,7 +16,7 @@ import time
 import meshio
 import numpy as np
 import pytest
-from conftest import clean_environment, fem_anim_command, mpirun_command
+from conftest import clean_environment, fem_anim_command, kill_tree, mpirun_command
 
 ARGS = ["run", "-q", "--set", "time.steps=150", "--set", "mesh.element_size=0.1",
         "--set", "output.checkpoint_every=10", "--set", "output.render=false",
@@ -52,7 +52,7 @@ def kill_midway(command: list[str], out, cwd) -> None:
         if partial_stats.exists() and len(partial_stats.read_text().splitlines()) > 45:
             break
         time.sleep(0.005)
-    os.killpg(proc.pid, signal.SIGKILL)
+    kill_tree(proc.pid, signal.SIGKILL)
     proc.wait()
     assert proc.returncode == -signal.SIGKILL, "the run finished before it could be killed"
 

@@ -212,7 +212,7 @@ def test_second_run_compiles_nothing(tmp_path):
         assert r.returncode == 0, r.stderr
         if run == "first":
             first = compiled()
-            assert len(first) >= 4  # objective, residual, Jacobian, energies, elements
+            assert len(first) >= 1  # 0.5: forms, expressions, elements; 0.9: no elements
     assert compiled() == first
 
 
