@@ -228,7 +228,11 @@ def test_2d_beam_survives_an_inverting_predictor(tmp_path):
                  "--set", "pin.0.min=[-0.001, -1]", "--set", "pin.0.max=[0.001, 1]",
                  "--set", "output.render=false"]) == 0
     rows = read_stats(out / "stats.csv")
-    assert len(rows) == 60 and all(math.isfinite(r["total_energy"]) for r in rows)
+    assert all(math.isfinite(r["total_energy"]) for r in rows)
+    # every frame reached (on gmsh 4.13's mesh some steps are substepped: more rows than 60)
+    ticks = [r["time"] * 60 for r in rows]
+    frames = {round(t) for t in ticks if abs(t - round(t)) < 1e-9}
+    assert frames == set(range(1, 61)) and rows[-1]["time"] == pytest.approx(1.0)
     final = meshio.read(out / "final.vtu")
     assert list(final.cells_dict) == ["triangle"]
     assert final.point_data["displacement"][:, 1].min() < -0.5

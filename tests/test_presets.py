@@ -103,14 +103,16 @@ def test_preset_reaches_the_cholesky_solution(name, reference, tmp_path):
 
 @serial_only
 def test_undamped_jacobi_diverges_with_a_clean_error(tmp_path, capsys):
-    """rho(I - D^-1 H) > 1 at dt = 1/60: Richardson-Jacobi needs the preset's damping.
+    """rho(I - D^-1 H) > 1 at dt = 1/60: Richardson-Jacobi needs the preset's damping
+    (its line-search damping switched off here, and a fixed damping of 1).
 
     (Adaptive time stepping would rescue it: at dt/4 the Hessian is mass dominated enough
     for rho < 1. It is switched off here to see the failure of the full step.)
     """
     fixed_steps = ["--set", "time.adaptive=false"] if "adaptive" in SCHEMA["time"] else []
     code = main(["run", "-o", str(tmp_path / "o"), "-q", *SMALL, *fixed_steps,
-                 "--solver", "richardson-jacobi", "-ksp_richardson_scale", "1"])
+                 "--solver", "richardson-jacobi", "-ksp_richardson_self_scale", "false",
+                 "-ksp_richardson_scale", "1"])
     assert code == 2
     assert "fem-anim: error: step 1" in capsys.readouterr().err
     assert not (tmp_path / "o" / "stats.csv").exists()
