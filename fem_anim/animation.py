@@ -20,7 +20,6 @@ the rendering process only (see :mod:`fem_anim.render`), never beside DOLFINx.
 from __future__ import annotations
 
 import math
-import os
 import shutil
 import time
 from dataclasses import dataclass
@@ -29,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FemAnimError
+from .rundir import RENDER_PRODUCTS, install, read_manifest
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
            "render_directory", "REQUIRED_FILES", "MAX_GIF_FPS"]
@@ -258,10 +258,9 @@ def _run_name(path: Path) -> str:
 
 
 def _move_into_place(staging: Path, path: Path) -> None:
-    """Replace the run's old pictures by the new ones (each rename atomic)."""
-    for item in staging.iterdir():
-        target = path / item.name
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target)
-        os.replace(item, target)
-    staging.rmdir()
+    """Replace the run's old pictures by the new ones (each rename atomic); a user's own
+    files in the run directory (notes in ``frames/``) are kept
+    (:func:`fem_anim.rundir.install`)."""
+    owned = read_manifest(path)
+    old = {name for name in owned if name.split("/")[0] in RENDER_PRODUCTS}
+    install(staging, path, replaces=old)

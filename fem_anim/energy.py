@@ -17,22 +17,49 @@ The drift is (E_end - E_0) / scale, the excursion max_t |E(t) - E_0| / scale.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
-__all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
-           "DAMPED_THRESHOLD"]
+import numpy as np
 
-#: A run that lost more than this fraction of the exchanged energy is flagged as damped.
+__all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
+           "DAMPED_THRESHOLD", "ROUNDOFF_STRAIN", "moving_pins"]
+
+#: A run that lost (gained) more than this fraction of the exchanged energy is flagged
+#: as damped (as gaining energy).
 DAMPED_THRESHOLD = 0.05
+#: Energies below E_Young * volume * ROUNDOFF_STRAIN^2 are the solver's round-off, not
+#: motion: no relative figure is computed from them (a body at rest has no "drift").
+ROUNDOFF_STRAIN = 1.0e-6
+
+
+def moving_pins(scene) -> bool:
+    """Whether any pin of ``scene`` moves (a handle): it then works on the body."""
+    return any(p["velocity"] is not None or p["angular_velocity"] != 0 for p in scene["pin"])
+
+
+def _volume(domain) -> float:
+    """|Omega| from the input mesh on rank 0 (simplex volumes |det(x_i - x_0)| / d!)."""
+    if domain.mesh.comm.rank != 0:
+        return domain.mesh.comm.bcast(None, root=0)
+    x = domain.points[domain.cells]
+    edges = x[:, 1:, :] - x[:, :1, :]
+    d = edges.shape[1]
+    volume = float(np.sum(np.abs(np.linalg.det(edges))) / math.factorial(d))
+    return domain.mesh.comm.bcast(volume, root=0)
 
 
 def initial_energies(sim) -> dict[str, float]:
-    """Kinetic, elastic, gravitational and total energy of ``sim``'s initial state."""
+    """Kinetic, elastic, gravitational and total energy of ``sim``'s initial state, and
+    ``roundoff``: the energy below which a figure is round-off (:data:`ROUNDOFF_STRAIN`)."""
     state = sim.initial_state()
     p = sim.problem
     p.u.x.array[:] = state.u
     p.v.x.array[:] = state.v
-    return p.energies()
+    energies = p.energies()
+    young = sim.scene["material"]["youngs_modulus"]
+    energies["roundoff"] = young * _volume(sim.domain) * ROUNDOFF_STRAIN**2
+    return energies
 
 
 def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
@@ -46,29 +73,40 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
 
     Returns:
         A dictionary with ``initial_energy``, ``final_energy``, ``exchanged_energy``,
-        ``drift`` (signed, relative), ``max_excursion`` (relative), ``conservative``
-        (whether the scene conserves energy) and ``damped`` (a conservative scene that
-        lost more than :data:`DAMPED_THRESHOLD` of the exchanged energy).
+        ``drift`` (signed, relative; None when the exchanged energy is at round-off
+        level), ``max_excursion`` (relative, or None), ``conservative`` (whether the
+        scene conserves energy), ``damped`` (a conservative scene that lost more than
+        :data:`DAMPED_THRESHOLD` of the exchanged energy), ``gained`` (one that gained
+        as much), ``flagged`` (either) and ``friction_newmark`` (lagged friction under
+        the trapezoidal rule, which does not keep the energy at impacts: see
+        :func:`describe_energy`).
     """
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]
     exchanged = max([abs(e0)] + [r["kinetic"] for r in rows]
                     + [potential0 - r["elastic"] - r["gravity"] for r in rows])
-    moving = any(p["velocity"] is not None or p["angular_velocity"] != 0 for p in scene["pin"])
-    conservative = "damping" not in scene.data and not moving
+    conservative = "damping" not in scene.data and not moving_pins(scene)
     e_end = rows[-1]["total_energy"] if rows else e0
-    if exchanged > 0.0:
+    drift = excursion = None
+    if exchanged > initial.get("roundoff", 0.0):
         drift = (e_end - e0) / exchanged
         excursion = max(abs(r["total_energy"] - e0) for r in rows) / exchanged if rows else 0.0
-    else:  # nothing moved: nothing to drift
-        drift = excursion = 0.0
+    damped = conservative and drift is not None and drift < -DAMPED_THRESHOLD
+    gained = conservative and drift is not None and drift > DAMPED_THRESHOLD
+    friction = any(ob["friction"] > 0 for ob in scene["obstacle"])
     return {"initial_energy": e0, "final_energy": e_end, "exchanged_energy": exchanged,
             "drift": drift, "max_excursion": excursion, "conservative": conservative,
-            "damped": conservative and drift < -DAMPED_THRESHOLD}
+            "damped": damped, "gained": gained, "flagged": damped or gained,
+            "friction_newmark": friction and scene["time"]["integrator"] == "newmark"}
 
 
-def describe_energy(report: dict, integrator: str) -> str:
-    """One line for the terminal: the drift, and a warning when the step damped the motion."""
+def describe_energy(report: dict, scene) -> str:
+    """One line for the terminal: the drift, and a warning for a gain or a loss that the
+    scene does not explain, with advice only where it applies."""
+    integrator = scene["time"]["integrator"]
+    if report["drift"] is None:
+        return (f"no energy exchanged above round-off ({report['exchanged_energy']:.3g} J): "
+                "the body stayed at rest")
     pct = 100.0 * report["drift"]
     base = (f"energy drift {pct:+.3g} % of the exchanged energy "
             f"({report['exchanged_energy']:.4g} J), max excursion "
@@ -76,9 +114,22 @@ def describe_energy(report: dict, integrator: str) -> str:
     if not report["conservative"]:
         return base + " (not conserved by design: damping or moving pins)"
     if report["damped"]:
-        return (base + f"; numerical damping: {integrator} with this time step damped away "
-                f"{-pct:.3g} % of the energy (use newmark or a smaller time.dt to keep "
-                "the motion)")
+        advice = "a smaller time.dt" if integrator == "newmark" else \
+            "newmark or a smaller time.dt"
+        cause = "friction and " if any(ob["friction"] > 0 for ob in scene["obstacle"]) else ""
+        return (base + f"; energy lost: {cause}{integrator} with this time step took away "
+                f"{-pct:.3g} % of the energy (use {advice} to keep the motion)")
+    if report["gained"]:
+        if report["friction_newmark"]:
+            why = ("lagged friction under newmark: the trapezoidal rule averages each step's "
+                   "friction force with the previous step's, whose direction and pressure "
+                   "are stale at an impact or a reversal of the slip, so friction can do "
+                   "positive work (use implicit_euler or bdf2 for frictional contact)")
+        elif scene["obstacle"]:
+            why = "the stiff contact barrier under this time step: use a smaller time.dt"
+        else:
+            why = "the time step or the solver tolerance: use a smaller time.dt"
+        return base + f"; energy GAINED {pct:.3g} %, not conserved by the scheme: {why}"
     return base
 
 
