@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FemAnimError
-from .rundir import RENDER_PRODUCTS, install, read_manifest
+from .rundir import install, read_manifest
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
            "render_directory", "REQUIRED_FILES", "MAX_GIF_FPS"]
@@ -258,9 +258,10 @@ def _run_name(path: Path) -> str:
 
 
 def _move_into_place(staging: Path, path: Path) -> None:
-    """Replace the run's old pictures by the new ones (each rename atomic); a user's own
-    files in the run directory (notes in ``frames/``) are kept
+    """Replace the run's old pictures by the new ones (each rename atomic). Only what this
+    rendering made again is replaced (``frames/`` as a whole, when it made frames: an older
+    rendering's surplus frames go); a user's own files (notes in ``frames/``) are kept
     (:func:`fem_anim.rundir.install`)."""
-    owned = read_manifest(path)
-    old = {name for name in owned if name.split("/")[0] in RENDER_PRODUCTS}
+    made = {item.name for item in staging.iterdir()}
+    old = {name for name in read_manifest(path) if name.split("/")[0] in made}
     install(staging, path, replaces=old)

@@ -20,7 +20,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .errors import ConvergenceError, FemAnimError, Interrupted
+from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
 from .petsc_options import check_cli_options, init_petsc, split_petsc_args
 
 __all__ = ["main", "build_parser"]
@@ -215,6 +215,9 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + err.signum
     except FemAnimError as err:
         _print_error(str(err))
+        return EXIT_USAGE
+    except OSError as err:  # one a library call did not name itself: the file and why
+        _print_error(describe_os_error(err))
         return EXIT_USAGE
     except KeyboardInterrupt:
         _print_error("interrupted")

@@ -149,6 +149,12 @@ def options_in_database(prefix: str, options: Mapping[str, str]) -> Iterator[Non
 READ_BY_FEM_ANIM = frozenset({"mat_type"})
 
 
+#: Option names ending so take a number (``-snes_rtol abc`` is refused naming it).
+NUMERIC_SUFFIXES = ("_rtol", "_atol", "_stol", "_divtol", "_max_it", "_max_funcs", "_restart",
+                    "_levels", "_damping", "_shift_amount", "_omega", "_its", "_lag_jacobian",
+                    "_lag_preconditioner", "_maxstep", "_minlambda", "_trtol", "_icntl_13")
+
+
 def _viewer_file(value: str) -> str | None:
     """The file of a viewer value ``[type]:file[:format[:mode]]``, or None."""
     if ":" not in value:
@@ -180,6 +186,12 @@ def check_cli_options(solver: Mapping[str, str], global_args: list[str]) -> None
             number = 0.0
         if not math.isfinite(number):
             raise FemAnimError(f"PETSc option {option} must be finite, got {value!r}")
+        if option.endswith(NUMERIC_SUFFIXES):
+            try:
+                float(value)
+            except ValueError:
+                raise FemAnimError(f"PETSc option {option} must be a number, got {value!r}") \
+                    from None
         target = _viewer_file(value)
         if target is not None:
             folder = os.path.dirname(os.path.abspath(target))
