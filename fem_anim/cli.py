@@ -130,10 +130,10 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
             kept = f"the frames so far are kept in {out}/.partial (no checkpoint yet: " \
                    "nothing to resume; a new run replaces them)"
         else:
+            other = " (e.g. with other solver options)" \
+                if isinstance(err, ConvergenceError) else ""
             kept = f"the frames so far and the last checkpoint are kept in {out}/.partial: " \
-                   f"continue with `{resume_command(argv, out)}`"
-        if isinstance(err, ConvergenceError):
-            kept += " (e.g. with other solver options)"
+                   f"continue with `{resume_command(argv, out)}`{other}"
         raise type(err)(f"{err}; {kept}", *err.args[1:]) from None
     report = energy_report(result.rows, initial, scene)
     if MPI.COMM_WORLD.rank == 0:

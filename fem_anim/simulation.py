@@ -23,6 +23,7 @@ from dolfinx.fem import petsc as fem_petsc
 
 from . import compat
 from .checkpoint import load_checkpoint, save_checkpoint
+from .energy import moving_pins
 from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
 from .initial import initial_velocity
 from .integrator import Integrator, State
@@ -225,9 +226,10 @@ class Simulation:
         r.destroy()
         step.destroy()
         if not math.isfinite(p.objective(None, x)):
-            raise ConvergenceError(f"{what}: no start for Newton keeps every element "
-                                   "uninverted (the pins move too far in one step): reduce "
-                                   "time.dt")
+            why = "the pins move too far in one step" if moving_pins(self.scene) else \
+                "the motion predicted over one step inverts elements or overflows"
+            raise ConvergenceError(f"{what}: no start for Newton gives a finite step "
+                                   f"objective ({why}): reduce time.dt")
 
     # -- the run --------------------------------------------------------------------------
     def run(self, output_dir: Path | None = None, quiet: bool = False,
