@@ -134,7 +134,9 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
                 if isinstance(err, ConvergenceError) else ""
             kept = f"the frames so far and the last checkpoint are kept in {out}/.partial: " \
                    f"continue with `{resume_command(argv, out)}`{other}"
-        raise type(err)(f"{err}; {kept}", *err.args[1:]) from None
+        if isinstance(err, Interrupted):
+            raise Interrupted(f"{err}; {kept}", err.signum) from None
+        raise ConvergenceError(f"{err}; {kept}") from None
     report = energy_report(result.rows, initial, scene)
     if MPI.COMM_WORLD.rank == 0:
         write_summary(result.output_dir / "summary.json", scene, result.rows, report)

@@ -144,7 +144,7 @@ def test_interrupted_mpi_run_leaves_a_resumable_directory(tmp_path):
 # -- 3. one run per directory -------------------------------------------------------------------
 def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
     out = tmp_path / "run"
-    args = ["run", "-q", *COARSE, "--set", "time.steps=60", "--set",
+    args = ["run", "-q", *COARSE, "--set", "time.steps=400", "--set",
             "output.checkpoint_every=5", "-o", str(out)]
     first = start(args)
     wait_for_rows(out, 12, first)
@@ -156,10 +156,10 @@ def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
     os.killpg(first.pid, signal.SIGKILL)  # dies holding the lock
     first.wait()
     assert (out / LOCK).read_text().strip() == str(first.pid)  # a stale lock file
-    resumed = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=60", "--set",
+    resumed = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=400", "--set",
                         "output.checkpoint_every=5", "--resume", str(out)])
     assert resumed.returncode == 0, resumed.stderr
-    assert frames(out / "trajectory.xdmf") == 61
+    assert frames(out / "trajectory.xdmf") == 401
 
 
 # -- 1. only fem_anim's own files ------------------------------------------------------------
