@@ -83,7 +83,7 @@ def tree(path: Path) -> dict[str, bytes]:
                          ids=lambda s: signal.Signals(s).name)
 def test_signal_keeps_the_run_and_prints_the_resume_command(tmp_path, sig):
     out = tmp_path / "run"
-    args = ["run", "-q", *COARSE, "--set", "time.steps=400", "--set",
+    args = ["run", "-q", *COARSE, "--set", "time.steps=120", "--set",
             "output.checkpoint_every=1000", "-o", str(out)]
     proc = start(args)
     wait_for_rows(out, 5, proc)
@@ -93,7 +93,7 @@ def test_signal_keeps_the_run_and_prints_the_resume_command(tmp_path, sig):
     line = one_error_line(stderr)
     name = signal.Signals(sig).name
     assert f"interrupted by {name} at frame" in line
-    frame = int(re.search(r"at frame (\d+) of 400", line).group(1))
+    frame = int(re.search(r"at frame (\d+) of 120", line).group(1))
     # no periodic checkpoint was due (every 1000 frames): the interruption wrote this one
     meta = checkpoint_meta(out / ".partial" / "checkpoint.npz")
     assert meta["frame"] == frame and meta["frames_written"] == frame + 1
@@ -114,12 +114,13 @@ def test_signal_keeps_the_run_and_prints_the_resume_command(tmp_path, sig):
     done = fem_anim(shlex.split(command)[1:])
     assert done.returncode == 0, done.stderr
     assert not (out / ".partial").exists()
-    assert frames(out / "trajectory.xdmf") == 401
+    assert frames(out / "trajectory.xdmf") == 121
     steps = [int(r.split(",")[0]) for r in (out / "stats.csv").read_text().splitlines()[1:]]
     assert steps == list(range(1, len(steps) + 1))
 
 
 @pytest.mark.mpi
+@pytest.mark.slow
 def test_interrupted_mpi_run_leaves_a_resumable_directory(tmp_path):
     mpirun = mpirun_command(2)
     if mpirun is None:
@@ -144,7 +145,7 @@ def test_interrupted_mpi_run_leaves_a_resumable_directory(tmp_path):
 # -- 3. one run per directory -------------------------------------------------------------------
 def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
     out = tmp_path / "run"
-    args = ["run", "-q", *COARSE, "--set", "time.steps=400", "--set",
+    args = ["run", "-q", *COARSE, "--set", "time.steps=200", "--set",
             "output.checkpoint_every=5", "-o", str(out)]
     first = start(args)
     wait_for_rows(out, 12, first)
@@ -156,10 +157,10 @@ def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
     os.killpg(first.pid, signal.SIGKILL)  # dies holding the lock
     first.wait()
     assert (out / LOCK).read_text().strip() == str(first.pid)  # a stale lock file
-    resumed = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=400", "--set",
+    resumed = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=200", "--set",
                         "output.checkpoint_every=5", "--resume", str(out)])
     assert resumed.returncode == 0, resumed.stderr
-    assert frames(out / "trajectory.xdmf") == 401
+    assert frames(out / "trajectory.xdmf") == 201
 
 
 # -- 1. only fem_anim's own files ------------------------------------------------------------
@@ -260,15 +261,13 @@ def test_disk_full_is_one_line_and_keeps_the_run(tmp_path):
         assert meta["frame"] >= 5
 
 
-def test_read_only_file_system(tmp_path):
+def test_read_only_file_system(interrupted, tmp_path):
+    source, _ = interrupted
+    args = ["run", "-q", *COARSE, "--set", "time.steps=300", "--set",
+            "output.checkpoint_every=1000"]
     with tmpfs(tmp_path / "ro", "2m") as ro:
         out = ro / "run"
-        args = ["run", "-q", *COARSE, "--set", "time.steps=300", "--set",
-                "output.checkpoint_every=1000"]
-        proc = start(args + ["-o", str(out)])
-        wait_for_rows(out, 3, proc)
-        proc.send_signal(signal.SIGINT)
-        proc.communicate(timeout=120)
+        subprocess.run(["cp", "-a", str(source), str(out)], check=True)
         before = tree(out)
         subprocess.run(["mount", "-o", "remount,ro", str(ro)], check=True)
         for extra in (["-o", str(ro / "new")], ["--resume", str(out)]):
@@ -279,18 +278,15 @@ def test_read_only_file_system(tmp_path):
         assert tree(out) == before
 
 
-def test_truncated_trajectory_under_partial_is_refused(tmp_path):
+def test_truncated_trajectory_under_partial_is_refused(interrupted, tmp_path):
+    source, _ = interrupted
     out = tmp_path / "run"
-    args = ["run", "-q", *COARSE, "--set", "time.steps=300", "--set",
-            "output.checkpoint_every=1000"]
-    proc = start(args + ["-o", str(out)])
-    wait_for_rows(out, 3, proc)
-    proc.send_signal(signal.SIGINT)
-    proc.communicate(timeout=120)
+    subprocess.run(["cp", "-a", str(source), str(out)], check=True)
     h5 = out / ".partial" / "trajectory.h5"
     h5.write_bytes(h5.read_bytes()[: h5.stat().st_size // 2])
     before = tree(out)
-    r = fem_anim(args + ["--resume", str(out)])
+    r = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=300", "--set",
+                  "output.checkpoint_every=1000", "--resume", str(out)])
     assert r.returncode == 2
     line = one_error_line(r.stderr)
     assert str(h5) in line and "truncated" in line, line
@@ -391,7 +387,8 @@ def test_checkpoint_altered_byte_by_byte(interrupted, capsys):
             continue
         assert ck.frame == good.frame and ck.rows == good.rows
         np.testing.assert_array_equal(ck.state.u, good.state.u)
-    assert refused >= 140  # zip CRCs and the validation catch all but header padding
+    assert refused >= 140, refused  # zip CRCs and the validation catch nearly every byte
+    print(f"{refused} of 150 altered checkpoints refused")
 
 
 def test_resume_with_another_output_directory_is_refused(interrupted, tmp_path, capsys):
@@ -403,32 +400,26 @@ def test_resume_with_another_output_directory_is_refused(interrupted, tmp_path, 
 
 
 # -- 6. command-line PETSc options ------------------------------------------------------------
-@pytest.mark.parametrize("option", [["-ksp_tpye", "cg"], ["-snes_linesearch_tpye", "bt"],
-                                    ["-pc_factor_mat_solver_tpye", "mumps"]])
-def test_misspelt_petsc_option_is_an_error(tmp_path, option):
+def test_misspelt_petsc_options_are_an_error(tmp_path):
+    typos = ["-ksp_tpye", "-snes_linesearch_tpye", "-pc_factor_mat_solver_tpye"]
     r = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=2", "-o", str(tmp_path / "o"),
-                  *option])
+                  typos[0], "cg", typos[1], "bt", typos[2], "mumps", "-ksp_type", "preonly"])
     assert r.returncode == 2
     line = one_error_line(r.stderr)
-    assert f"PETSc option {option[0]} was read by no solver object" in line
+    assert f"PETSc option {', '.join(sorted(typos))} was read by no solver object" in line
+    assert "-ksp_type" not in line.replace("-ksp_tpye", "")
 
 
-def test_monitors_reasons_and_views_print_what_petsc_prints(tmp_path):
+def test_monitors_reasons_views_and_log_view_print_what_petsc_prints(tmp_path):
+    log = tmp_path / "log.txt"
     r = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=1", "-o", str(tmp_path / "o"),
                   "-snes_monitor", "-snes_converged_reason", "-ksp_converged_reason",
-                  "-snes_view"])
+                  "-snes_view", "-log_view", f":{log}"])
     assert r.returncode == 0, r.stderr
     assert re.search(r"0 SNES Function norm", r.stdout)
     assert "Nonlinear fem_anim_ solve converged due to" in r.stdout
     assert "Linear fem_anim_ solve converged due to" in r.stdout
     assert "SNES Object: (fem_anim_)" in r.stdout
-
-
-def test_log_view_writes_its_file(tmp_path):
-    log = tmp_path / "log.txt"
-    r = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=1", "-o", str(tmp_path / "o"),
-                  "-log_view", f":{log}"])
-    assert r.returncode == 0, r.stderr
     assert "PETSc Performance Summary" in log.read_text()
 
 
