@@ -20,7 +20,8 @@
 #   rule keeps a modified L exactly and L itself up to O(h^2), tests/test_analytic.py);
 # * the total energy drifts by less than 1 % of the kinetic energy, and no cell inverts.
 #
-# The full run writes `out/demos/imported_mesh/imported_mesh.png` (`demos/imported_mesh.png`, shown in the README, is a copy).
+# The full run writes `out/demos/imported_mesh/imported_mesh.png`
+# (`demos/imported_mesh.png`, shown in the README, is a copy).
 
 # %%
 import os

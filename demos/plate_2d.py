@@ -17,7 +17,8 @@
 #   w = q L^4 / (8 E' I), q = rho g t, E' = E / (1 - nu^2), I = t^3/12, within 3 % (shear and
 #   finite rotation make the plate differ by about 1 %).
 #
-# The full run writes `out/demos/plate_2d/plate_2d.png` (`demos/plate_2d.png`, shown in the README, is a copy).
+# The full run writes `out/demos/plate_2d/plate_2d.png`
+# (`demos/plate_2d.png`, shown in the README, is a copy).
 
 # %%
 import os

@@ -19,7 +19,8 @@
 #   the Poynting effect's cousin), |Delta L| < 5 %.
 #
 # Set FEM_ANIM_DEMO_REDUCED=1 for the short, coarse variant the test suite runs (45 degrees
-# per end). The full run writes `out/demos/twisted_bar/twisted_bar.png` (`demos/twisted_bar.png`, shown in the README, is a copy).
+# per end). The full run writes `out/demos/twisted_bar/twisted_bar.png`
+# (`demos/twisted_bar.png`, shown in the README, is a copy).
 
 # %%
 import os

@@ -107,9 +107,9 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         scene conserves energy: no damping, friction or moving pin), ``damped`` (a
         conservative scene that lost more than :data:`DAMPED_THRESHOLD` of the exchanged
         energy), ``gained`` (a scene without moving pins that gained as much: damping and
-        friction only dissipate), ``flagged`` (either) and ``friction_newmark`` (lagged friction under
-        the trapezoidal rule, which does not keep the energy at impacts: see
-        :func:`describe_energy`).
+        friction only dissipate), ``flagged`` (either) and ``friction_newmark`` (lagged
+        friction under the trapezoidal rule, which does not keep the energy at impacts:
+        see the module docstring).
     """
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]

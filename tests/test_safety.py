@@ -17,7 +17,6 @@ import shlex
 import signal
 import subprocess
 import time
-import zipfile
 from pathlib import Path
 
 import meshio
