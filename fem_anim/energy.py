@@ -30,8 +30,9 @@ Lagged friction (IPC: pressure and tangent from the step's start) adds to it by 
 mechanism (the previous step's friction force acts after the slip has turned; 25 % instead
 of 11 % with mu = 0.5 on the jelly cube at dt = 0.01 s), and moves the energy up as well as
 down while sliding. It is inherent to the scheme, not a defect of the friction term, which
-is dissipative within its own step (convex, minimal at zero slip): with BDF2 or implicit
-Euler the same scenes only lose energy. A Newmark run with obstacles that gains energy is
+is dissipative within its own step (convex, minimal at zero slip): under BDF2 the same
+scenes (jelly cube with and without friction, the sliding block) never rise above their
+initial energy. A Newmark run with obstacles that gains energy is
 flagged with this explanation (:data:`NEWMARK_CONTACT`).
 """
 
