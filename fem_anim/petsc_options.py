@@ -3,9 +3,10 @@
 Precedence, lowest to highest: library defaults < solver preset < scene
 ``[solver.petsc]`` < command line. The merged options are put into PETSc's
 database under the solver's prefix only while the solver reads them
-(``setFromOptions``, and each solve: ``-snes_converged_reason``, ``-ksp_view`` and the
-sub-solvers' options are read there), then removed, so two solvers never see each
-other's options.
+(``setFromOptions``, and each solve: ``-snes_converged_reason``, ``-ksp_view``, the
+factorisation's ``-mat_mumps_*`` and the sub-solvers' ``-sub_*`` are read there, the last
+two only when the first solve sets the preconditioner up), then removed, so two solvers
+never see each other's options.
 
 Command-line options are held to the scene's standard (:func:`check_cli_options`,
 :func:`unused_options`): values finite, viewers' files writable, and an option that no
