@@ -319,11 +319,11 @@ class Simulation:
         else:
             state = self.initial_state()
         stats_file = trajectory = None
-        if run_dir:
-            stats_file = self._io(run_dir.file("stats.csv"), StatsWriter,
-                                  run_dir.file("stats.csv"), self.comm, rows)
+        if run_dir:  # the trajectory first: a resume it refuses leaves stats.csv as it was
             trajectory = self._io(run_dir.file("trajectory.h5"), TrajectoryWriter,
                                   run_dir.file("trajectory.xdmf"), self.domain, kept)
+            stats_file = self._io(run_dir.file("stats.csv"), StatsWriter,
+                                  run_dir.file("stats.csv"), self.comm, rows)
 
         def checkpoint(frame: int) -> None:
             path = run_dir.file("checkpoint.npz")
