@@ -157,10 +157,12 @@ def _render(args) -> int:
 
     from .animation import check_run_directory
     from .render import render_run
+    from .rundir import check_not_in_use
     from .scene import validate_render
 
     outdir = Path(args.outdir)
     check_run_directory(outdir)
+    check_not_in_use(outdir)
     saved = None
     if (outdir / "scene.json").is_file():
         try:

@@ -11,7 +11,8 @@ runs and renderings made there (its *manifest*). Then:
   results do not replace is removed; a file the manifest does not list (a user's notes
   in ``frames/``) is never touched;
 * one run per directory: :func:`claim` takes an exclusive ``flock`` on :data:`LOCK`
-  for the life of the process. The kernel drops the lock when its process dies,
+  for the life of the process (and ``fem-anim render`` refuses a held directory,
+  :func:`check_not_in_use`). The kernel drops the lock when its process dies,
   however it dies, so a stale lock never blocks a new run; the file keeps the holder's
   pid, which the refusal names.
 
@@ -27,8 +28,8 @@ from pathlib import Path
 
 from .errors import FemAnimError, describe_os_error
 
-__all__ = ["MARKER", "LOCK", "STAGING", "claim", "install", "read_manifest",
-           "write_manifest", "write_atomically", "RENDER_PRODUCTS"]
+__all__ = ["MARKER", "LOCK", "STAGING", "claim", "check_not_in_use", "install",
+           "read_manifest", "write_manifest", "write_atomically", "RENDER_PRODUCTS"]
 
 MARKER = ".fem_anim-run"
 LOCK = ".fem_anim-lock"
@@ -107,6 +108,26 @@ def claim(path: Path) -> int:
     os.ftruncate(fd, 0)
     os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
     return fd
+
+
+def check_not_in_use(path: Path) -> None:
+    """Refuse a directory a live run holds (``fem-anim render`` while it is written).
+
+    Raises:
+        FemAnimError: naming the holder's pid.
+    """
+    try:
+        fd = os.open(Path(path) / LOCK, os.O_RDONLY)
+    except OSError:
+        return  # no lock file: no run was ever started here by a locking fem_anim
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+        raise FemAnimError(f"{path} is in use by a running fem-anim run (pid {holder}); "
+                           "render it when the run has ended") from None
+    finally:
+        os.close(fd)
 
 
 def _files_below(root: Path) -> set[str]:

@@ -163,6 +163,20 @@ def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
 
 
 # -- 1. only fem_anim's own files ------------------------------------------------------------
+def test_render_refuses_a_directory_a_run_holds(tmp_path, capsys):
+    from fem_anim.rundir import claim
+
+    out = tmp_path / "run"
+    assert main(["run", "-q", *COARSE, "--set", "time.steps=1", "-o", str(out)]) == 0
+    fd = claim(out)  # as a running fem-anim holds it
+    try:
+        assert main(["render", str(out), "-q"]) == 2
+        line = one_error_line(capsys.readouterr().err)
+        assert f"in use by a running fem-anim run (pid {os.getpid()})" in line
+    finally:
+        os.close(fd)
+
+
 def test_users_folder_is_never_written_into(tmp_path, capsys):
     folder = tmp_path / "mine"
     (folder / "frames").mkdir(parents=True)
