@@ -28,7 +28,8 @@
 #   (1 + omega h/2)/(1 - omega h/2)] times H_0 and never drifts (stable for omega h < 2).
 #
 # Parameters: m = 1 kg, k = 4 pi^2 N/m (period 1 s), x_0 = 0.1 m, v_0 = 0, h = 0.05 s,
-# 10 periods. The full run also draws `demos/harmonic_oscillator.png` (energy over time).
+# 10 periods. The full run also draws `out/demos/harmonic_oscillator.png` (energy over time;
+# `demos/harmonic_oscillator.png`, shown in the README, is a copy).
 
 # %%
 import os
@@ -39,7 +40,7 @@ import numpy as np
 from fem_anim.integrator import Integrator, State
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
-HERE = Path(__file__).resolve().parent
+OUT = Path(os.environ.get("FEM_ANIM_DEMO_OUT", "out/demos"))
 m, k = 1.0, 4.0 * np.pi**2  # kg, N/m
 omega = np.sqrt(k / m)
 x0, h, periods = 0.1, 0.05, 10
@@ -127,5 +128,6 @@ if not REDUCED:
     ax.legend()
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(HERE / "harmonic_oscillator.png", dpi=100)
-    print(f"picture {HERE / 'harmonic_oscillator.png'}")
+    OUT.mkdir(parents=True, exist_ok=True)
+    fig.savefig(OUT / "harmonic_oscillator.png", dpi=100)
+    print(f"picture {OUT / 'harmonic_oscillator.png'}")

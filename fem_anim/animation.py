@@ -20,7 +20,6 @@ the rendering process only (see :mod:`fem_anim.render`), never beside DOLFINx.
 from __future__ import annotations
 
 import math
-import os
 import shutil
 import time
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ import numpy as np
 
 from .errors import FemAnimError
 from .frame_renderer import FrameRenderer
+from .rundir import install, read_manifest
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
            "render_directory", "REQUIRED_FILES", "MAX_GIF_FPS"]
@@ -257,10 +257,10 @@ def _run_name(path: Path) -> str:
 
 
 def _move_into_place(staging: Path, path: Path) -> None:
-    """Replace the run's old pictures by the new ones (each rename atomic)."""
-    for item in staging.iterdir():
-        target = path / item.name
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target)
-        os.replace(item, target)
-    staging.rmdir()
+    """Replace the run's old pictures by the new ones (each rename atomic). Only what this
+    rendering made again is replaced (``frames/`` as a whole, when it made frames: an older
+    rendering's surplus frames go); a user's own files (notes in ``frames/``) are kept
+    (:func:`fem_anim.rundir.install`)."""
+    made = {item.name for item in staging.iterdir()}
+    old = {name for name in read_manifest(path) if name.split("/")[0] in made}
+    install(staging, path, replaces=old)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,8 +35,9 @@ FIELDS = ("u", "v", "a", "u_old", "v_old")
 
 
 def scene_hash(scene) -> str:
-    """A fingerprint of the validated scene (output settings excluded)."""
-    data = {k: v for k, v in scene.data.items() if k != "output"}
+    """A fingerprint of the validated scene: everything that shapes the motion (the output
+    and render settings excluded)."""
+    data = {k: v for k, v in scene.data.items() if k not in ("output", "render")}
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
 
@@ -92,12 +94,58 @@ def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: i
     write_atomically(Path(path), buffer.getvalue())
 
 
+def _invalid(meta, data: dict, sim) -> str | None:
+    """What is wrong with a checkpoint's contents for ``sim``, or None.
+
+    A checkpoint is written after frame k, 1 <= k < steps, at t = k h after ``step``
+    accepted substeps (one stats row each), with at most k / every + 1 trajectory frames;
+    its arrays are one row per dof block of this scene's mesh, all finite.
+    """
+    if not isinstance(meta, dict) or meta.get("scene") != scene_hash(sim.scene):
+        return "it was written for a different scene (the scene's physics changed)"
+    cfg = sim.scene["time"]
+    h, steps, every = cfg["dt"], cfg["steps"], sim.scene["output"]["every"]
+    ints = ("step", "frame", "frames_written")
+    if not all(type(meta.get(k)) is int for k in ints) or \
+            not all(isinstance(meta.get(k), (int, float)) for k in ("time", "shift")) or \
+            not isinstance(meta.get("rows"), list) or not isinstance(meta.get("stepper"), dict):
+        return "its record of the run is incomplete"
+    frame, step, written = meta["frame"], meta["step"], meta["frames_written"]
+    if not 1 <= frame < steps:
+        return f"frame {frame} is outside 1..{steps - 1} (time.steps = {steps})"
+    if not math.isclose(meta["time"], frame * h, rel_tol=1e-9, abs_tol=1e-9 * h):
+        return f"time {meta['time']!r} is not frame {frame} x time.dt = {frame * h!r}"
+    if step < frame or len(meta["rows"]) != step:
+        return f"step {step} does not match frame {frame} and its {len(meta['rows'])} stats rows"
+    if not 1 <= written <= frame // every + 1:
+        return f"{written} trajectory frames cannot have been written by frame {frame}"
+    dts = [meta["stepper"].get(k) for k in ("dt", "last_dt")]
+    if not all(isinstance(v, (int, float)) and 0.0 < v <= h * (1 + 1e-12) for v in dts):
+        return f"its time steps {dts} are not in (0, time.dt]"
+    if not (math.isfinite(meta["shift"]) and meta["shift"] >= 0.0):
+        return f"its Hessian shift {meta['shift']!r} is not a finite number >= 0"
+    keys = data.get("keys")
+    bs = sim.problem.V.dofmap.index_map_bs
+    if keys is None or keys.ndim != 1:
+        return "its dof keys are missing"
+    for name in FIELDS:
+        if name in data:
+            a = data[name]
+            if a.shape != (keys.size, bs) or a.dtype.kind != "f":
+                return f"array {name} has shape {a.shape}, not ({keys.size}, {bs})"
+            if not np.all(np.isfinite(a)):
+                return f"array {name} holds non-finite values"
+    if not all(name in data for name in ("u", "v", "a")):
+        return "its state arrays u, v, a are incomplete"
+    return None
+
+
 def load_checkpoint(path: Path, sim) -> Checkpoint:
     """Read ``path`` on every rank and pick this partition's dofs by their keys (collective).
 
     Raises:
-        FemAnimError: if the file is missing or unreadable, or was written for another
-            scene or mesh.
+        FemAnimError: if the file is missing or unreadable, was written for another
+            scene or mesh, or holds an impossible record (:func:`_invalid`).
     """
     comm = sim.comm
     error, data = None, None
@@ -110,8 +158,9 @@ def load_checkpoint(path: Path, sim) -> Checkpoint:
     except Exception as err:  # a corrupt file: np.load raises many types
         error = f"checkpoint {path} cannot be read: {err}"
     else:
-        if meta["scene"] != scene_hash(sim.scene):
-            error = f"checkpoint {path} was written for a different scene"
+        problem = _invalid(meta, data, sim)
+        if problem:
+            error = f"checkpoint {path} is not valid: {problem}; nothing was resumed"
     if comm.allreduce(error is not None, op=MPI.LOR):  # collective: every rank raises
         message = comm.bcast(error, root=0)
         raise FemAnimError(message or "the checkpoint could not be read on every process")

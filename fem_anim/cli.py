@@ -20,8 +20,8 @@ import sys
 from pathlib import Path
 
 from .console import print_error, quiet_jit_logging
-from .errors import ConvergenceError, FemAnimError
-from .petsc_options import init_petsc, split_petsc_args
+from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
+from .petsc_options import check_cli_options, init_petsc, split_petsc_args
 
 __all__ = ["main", "build_parser"]
 
@@ -42,7 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--set", dest="overrides", action="append", default=[],
                      metavar="KEY=VALUE", help="override a scene key (value parsed as TOML)")
     run.add_argument("--solver", help="linear solver preset (see `fem-anim solvers`)")
-    run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    run.add_argument("-q", "--quiet", action="store_true",
+                     help="no progress bar and no summary: print only warnings and errors")
     run.add_argument("--resume", metavar="OUTDIR",
                      help="continue the unfinished run in OUTDIR from its last checkpoint")
     render = sub.add_parser("render", help="render a saved run again (no simulation)")
@@ -58,40 +59,79 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _run(args, cli_options: dict[str, str]) -> int:
+def resume_command(argv: list[str], out: str) -> str:
+    """The command that continues an interrupted run: the same arguments (scene,
+    ``--set``, ``--solver``, PETSc options) with ``--resume OUT`` for ``-o``/``--resume``."""
+    import shlex
+
+    kept, skip = [], False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg in ("-o", "--output", "--resume"):
+            skip = True
+        elif not arg.startswith(("--output=", "--resume=")):
+            kept.append(arg)  # a compact -oDIR stays: it names the same directory
+    return shlex.join(["fem-anim", "run", *kept, "--resume", out])
+
+
+def _output_directory(args, scene) -> str:
+    """The run's directory; ``--resume`` and ``-o`` must agree (a resumed run continues in
+    its own directory)."""
+    if args.resume is not None and args.output is not None and \
+            Path(args.resume).resolve() != Path(args.output).resolve():
+        raise FemAnimError(f"--resume {args.resume} and -o {args.output} name different "
+                           "directories: a run is resumed in its own directory (drop -o)")
+    out = args.resume or args.output or scene["output"]["directory"] or f"out/{scene.name}"
+    if Path(out).exists() and not Path(out).is_dir():
+        raise FemAnimError(f"output directory {out} exists and is not a directory")
+    return out
+
+
+def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     from mpi4py import MPI
 
     from .scene import load_scene
 
+    if args.solver is not None and not args.solver.strip():
+        raise FemAnimError("--solver needs a preset name (see `fem-anim solvers`), got ''")
     scene = load_scene(args.scene, args.overrides)  # validate before importing dolfinx
-    out = args.resume or args.output or scene["output"]["directory"] or f"out/{scene.name}"
-    if Path(out).exists() and not Path(out).is_dir():
-        raise FemAnimError(f"output directory {out} exists and is not a directory")
+    out = _output_directory(args, scene)
     from .simulation import Simulation
 
     from .energy import describe_energy, energy_report, initial_energies, write_summary
     from .provenance import software_versions
+    from .rundir import read_manifest, write_manifest
 
     quiet_jit_logging()
     sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
     initial = initial_energies(sim)
     try:
         result = sim.run(Path(out), quiet=args.quiet, resume=args.resume is not None)
-    except ConvergenceError as err:
-        raise ConvergenceError(f"{err}; the frames so far and the last checkpoint are kept in "
-                               f"{out}/.partial: continue with --resume {out} (e.g. with other "
-                               "solver options)") from None
+    except (ConvergenceError, Interrupted) as err:
+        if not (Path(out) / ".partial" / "checkpoint.npz").is_file():
+            kept = f"the frames so far are kept in {out}/.partial (no checkpoint yet: " \
+                   "nothing to resume; a new run replaces them)"
+        else:
+            other = " (e.g. with other solver options)" \
+                if isinstance(err, ConvergenceError) else ""
+            kept = f"the frames so far and the last checkpoint are kept in {out}/.partial: " \
+                   f"continue with `{resume_command(argv, out)}`{other}"
+        if isinstance(err, Interrupted):
+            raise Interrupted(f"{err}; {kept}", err.signum) from None
+        raise ConvergenceError(f"{err}; {kept}") from None
     report = energy_report(result.rows, initial, scene)
     if MPI.COMM_WORLD.rank == 0:
         write_summary(result.output_dir / "summary.json", scene, result.rows, report,
                       {"versions": software_versions(MPI.COMM_WORLD),
                        "petsc_options": sim.options,
                        "wall": sim.clock.as_dict()})
-        if not args.quiet or report["damped"]:
+        write_manifest(result.output_dir, read_manifest(result.output_dir) | {"summary.json"})
+        if not args.quiet or report["flagged"]:
             last = result.rows[-1]
             print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "
                   f"total energy {last['total_energy']:.6g} J; outputs in {result.output_dir}")
-            print(f"{scene.name}: {describe_energy(report, scene['time']['integrator'])}")
+            print(f"{scene.name}: {describe_energy(report, scene)}")
     return 0
 
 
@@ -103,10 +143,12 @@ def _render(args) -> int:
 
     from .animation import check_run_directory
     from .render import render_run
+    from .rundir import check_not_in_use
     from .scene import validate_render
 
     outdir = Path(args.outdir)
     check_run_directory(outdir)
+    check_not_in_use(outdir)
     saved = None
     if (outdir / "scene.json").is_file():
         try:
@@ -138,6 +180,11 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``fem-anim``; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     app_args, solver_options, global_args = split_petsc_args(argv)
+    try:
+        check_cli_options(solver_options, global_args)
+    except FemAnimError as err:
+        print_error(str(err))
+        return EXIT_USAGE
     init_petsc(global_args)
     try:
         if app_args[:1] == ["bench"]:  # its own parser: argparse's REMAINDER drops --options
@@ -150,9 +197,17 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "render":
             return _render(args)
-        return _run(args, solver_options)
+        rest = list(argv)
+        rest.remove("run")
+        return _run(args, solver_options, rest)
+    except Interrupted as err:
+        print_error(str(err))
+        return 128 + err.signum
     except FemAnimError as err:
         print_error(str(err))
+        return EXIT_USAGE
+    except OSError as err:  # one a library call did not name itself: the file and why
+        print_error(describe_os_error(err))
         return EXIT_USAGE
     except KeyboardInterrupt:
         print_error("interrupted")

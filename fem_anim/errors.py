@@ -4,7 +4,10 @@ Library code raises these; only the command line turns them into a message and
 exit code 2. Every message names the offending key, file or value.
 """
 
-__all__ = ["FemAnimError", "SceneError", "MeshError", "ConvergenceError", "show_value"]
+import os
+
+__all__ = ["FemAnimError", "SceneError", "MeshError", "ConvergenceError", "Interrupted",
+           "show_value", "describe_os_error"]
 
 
 class FemAnimError(Exception):
@@ -21,6 +24,25 @@ class MeshError(FemAnimError):
 
 class ConvergenceError(FemAnimError):
     """A time step's minimisation did not converge."""
+
+
+class Interrupted(FemAnimError):
+    """A signal (SIGINT, SIGTERM, SIGHUP) stopped the run; ``signum`` says which."""
+
+    def __init__(self, message: str, signum: int):
+        super().__init__(message)
+        self.signum = signum
+
+
+def describe_os_error(err: OSError, path: object = None) -> str:
+    """``FILE: reason`` for an OS error: the file the error names, else ``path``.
+
+    h5py and some writers raise ``OSError`` without a file name or ``strerror``; the
+    caller's ``path`` (the file being written) names it then.
+    """
+    name = err.filename if err.filename is not None else path
+    reason = err.strerror or (os.strerror(err.errno) if err.errno else str(err) or "OS error")
+    return f"{name}: {reason}" if name is not None else reason
 
 
 def show_value(value: object, limit: int = 200) -> str:

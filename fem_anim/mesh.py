@@ -25,6 +25,7 @@ import numpy as np
 from mpi4py import MPI
 
 from . import compat
+from .connectivity import check_one_body
 from .errors import MeshError
 
 __all__ = [
@@ -38,10 +39,14 @@ __all__ = [
 ]
 
 CELL_NAMES = {2: "triangle", 3: "tetrahedron"}
+PLURAL = {2: "triangles", 3: "tetrahedra"}
 #: meshio cell types read as simplices of each dimension (higher-order ones by their corners).
 MESHIO_TYPES = {2: ("triangle", "triangle6", "triangle7"), 3: ("tetra", "tetra10")}
 #: Integer cell data taken as region markers, first found wins.
 MARKER_KEYS = ("gmsh:physical", "medit:ref", "cell_markers", "CellEntityIds")
+#: Coordinates beyond this (or a mesh smaller across than its inverse) are a unit mix-up:
+#: cell volumes would overflow (underflow) in double precision.
+MAX_COORDINATE = 1.0e100
 #: A cell whose ``|det D_m|`` is below this times its longest edge to the ``d`` is flat.
 FLAT = 1e-12
 
@@ -95,6 +100,15 @@ def _check_simplices(points: np.ndarray, cells: np.ndarray, source: str, what: s
         v = int(np.argmin(finite))
         raise MeshError(f"{source}: vertex {v} has a NaN or infinite coordinate "
                         f"{_fmt(points[v])}")
+    big = np.max(np.abs(points), axis=1) > MAX_COORDINATE
+    if np.any(big):  # volumes (edge lengths to the d) would overflow
+        v = int(np.argmax(big))
+        raise MeshError(f"{source}: vertex {v} {_fmt(points[v])} has a coordinate beyond "
+                        f"{MAX_COORDINATE:g} in magnitude")
+    extent = float(np.max(np.ptp(points, axis=0))) if n else 0.0
+    if 0.0 < extent < 1.0 / MAX_COORDINATE:  # volumes would underflow to zero
+        raise MeshError(f"{source}: the mesh is {extent:.3g} across, smaller than "
+                        f"{1.0 / MAX_COORDINATE:g} (a unit mix-up?)")
 
 
 def _signed_measures(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
@@ -263,8 +277,12 @@ def check_surface(points: np.ndarray, triangles: np.ndarray, source: str) -> Non
 
 def mesh_from_arrays(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray,
                      cell_markers: np.ndarray | None, source: str,
-                     marker_names: dict[str, int] | None = None) -> SimplexMesh:
+                     marker_names: dict[str, int] | None = None,
+                     one_body: bool = False) -> SimplexMesh:
     """Check and distribute a mesh given on rank 0 (collective).
+
+    With ``one_body`` the mesh must also be one connected piece without duplicate
+    vertices (:func:`fem_anim.connectivity.check_one_body`).
 
     Other ranks pass empty arrays of the right width. The check runs on rank 0 and its
     verdict is broadcast, so a bad mesh raises the same :class:`MeshError` on all ranks.
@@ -274,6 +292,8 @@ def mesh_from_arrays(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray,
     if comm.rank == 0:
         try:
             check_cells(points, cells, source)
+            if one_body:
+                check_one_body(points, cells, source)
         except MeshError as err:
             error = str(err)
     error = comm.bcast(error, root=0)
@@ -422,6 +442,14 @@ def read_mesh_file(path: Path, dim: int, element_size: float
         raise MeshError(f"{source}: points must have 2 or 3 coordinates, got shape "
                         f"{points.shape}")
     found = sorted({b.type for b in m.cells}) or ["none"]
+    other = sorted({b.type for b in m.cells if _cell_dim(b.type) >= dim
+                    and b.type not in MESHIO_TYPES[dim]})
+    if other and any(b.type in MESHIO_TYPES[dim] for b in m.cells):
+        counts = ", ".join(f"{sum(len(b.data) for b in m.cells if b.type == t)} {t}"
+                           for t in other)
+        raise MeshError(f"{source} mixes cell types: besides its {CELL_NAMES[dim]} cells it "
+                        f"has {counts} cells, which fem_anim cannot simulate (split them into "
+                        f"{PLURAL[dim]} in the mesh tool)")
     take = [k for k, b in enumerate(m.cells) if b.type in MESHIO_TYPES[dim]]
     surface = [b.data[:, :3] for b in m.cells if b.type in MESHIO_TYPES[2]]
     if not take and dim == 3 and surface:
@@ -449,6 +477,15 @@ def read_mesh_file(path: Path, dim: int, element_size: float
     names = {name: int(value[0]) for name, value in m.field_data.items()
              if len(value) >= 2 and int(value[1]) == dim}
     return points, cells, markers, names
+
+
+def _cell_dim(cell_type: str) -> int:
+    """Topological dimension of a meshio cell type (0 for a type not known here)."""
+    for dim, prefixes in ((3, ("tetra", "hexahedron", "wedge", "pyramid")),
+                          (2, ("triangle", "quad", "polygon")), (1, ("line",))):
+        if cell_type.startswith(prefixes):
+            return dim
+    return 0
 
 
 def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
@@ -479,4 +516,4 @@ def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
     error = comm.bcast(error, root=0)
     if error:
         raise MeshError(error)
-    return mesh_from_arrays(comm, points, cells, markers, source, names)
+    return mesh_from_arrays(comm, points, cells, markers, source, names, one_body=True)

@@ -4,7 +4,7 @@ Displacements are gathered to rank 0 in the input mesh's vertex order
 (:class:`VertexGather`), so a run under ``mpirun -n N`` writes the same files as a serial
 run. Everything is written into a staging directory ``OUTDIR/.partial`` and moved into
 ``OUTDIR`` only when the run succeeds (:class:`RunDirectory`): a failed run leaves no
-file posing as a result.
+file posing as a result, and keeps its staging area for ``--resume``.
 
 Files: ``trajectory.xdmf`` + ``trajectory.h5`` (displacement and cell energy density
 per frame, ParaView and meshio read it), ``stats.csv`` (one row per step), ``final.vtu``
@@ -25,16 +25,14 @@ import numpy as np
 from mpi4py import MPI
 
 from . import compat
-from .errors import FemAnimError
+from .errors import FemAnimError, describe_os_error
 from .mesh import SimplexMesh
+from .rundir import (RENDER_PRODUCTS, STAGING, claim, install, read_manifest,
+                     write_atomically)
 
 __all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "TrajectoryWriter",
            "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS"]
 
-#: Files :mod:`fem_anim.animation` and :mod:`fem_anim.plots` make from a run: a new run
-#: into the same directory removes the old ones, so no picture outlives its data.
-RENDER_PRODUCTS = ("final.png", "frames", "animation.gif", "animation.mp4", "energies.png",
-                   "newton.png")
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "newton_decrement", "shift", "kinetic", "elastic", "gravity",
                  "contact", "total_energy", "assembly_s", "factor_s", "linear_solve_s", "other_s",
@@ -104,56 +102,81 @@ def _pad3(a: np.ndarray) -> np.ndarray:
 
 
 class RunDirectory:
-    """The output directory with a staging area; only rank 0 touches the file system."""
+    """The output directory with a staging area; only rank 0 touches the file system.
+
+    Claimed (marked and locked, :func:`fem_anim.rundir.claim`) at construction; the
+    staging area ``OUTDIR/.partial`` receives every file while the run is in progress
+    and is installed by :meth:`commit` only after success. Nothing ever deletes it on
+    failure: its checkpoint and frames are what ``--resume`` continues. A fresh run
+    refuses a directory whose staging area holds a checkpoint (an unfinished run that
+    could be resumed); one without a checkpoint is only a failed start, and is replaced.
+    Every decision is taken on rank 0 and raised on every rank.
+    """
 
     def __init__(self, path: Path, comm: MPI.Comm, resume: bool = False):
         self.path = Path(path)
         self.comm = comm
-        self.staging = self.path / ".partial"
+        self.staging = self.path / STAGING
+        self._lock = None
+        error = None
+        if comm.rank == 0:
+            try:
+                self._lock = claim(self.path)
+                self._prepare(resume)
+            except FemAnimError as err:
+                error = str(err)
+            except OSError as err:
+                error = f"output directory {self.path} cannot be written: " \
+                        f"{describe_os_error(err, self.staging)}"
+            if error and self._lock is not None:
+                os.close(self._lock)
+                self._lock = None
+        error = comm.bcast(error, root=0)  # decided on rank 0, raised on every rank
+        if error:
+            raise FemAnimError(error)
+
+    def _prepare(self, resume: bool) -> None:
         if resume:
-            exists = comm.bcast(self.staging.is_dir() if comm.rank == 0 else None, root=0)
-            if not exists:
+            if not self.staging.is_dir():
                 raise FemAnimError(f"nothing to resume in {self.path}: no unfinished run there")
-        else:
-            error = None
-            if comm.rank == 0:
-                try:
-                    if self.staging.exists():
-                        shutil.rmtree(self.staging)
-                    self.staging.mkdir(parents=True)
-                except OSError as err:
-                    error = f"output directory {self.path} cannot be written: {err.strerror}"
-            error = comm.bcast(error, root=0)  # decided on rank 0, raised on every rank
-            if error:
-                raise FemAnimError(error)
+            return
+        if (self.staging / "checkpoint.npz").is_file():
+            raise FemAnimError(f"{self.path} holds an unfinished run with a checkpoint: "
+                               f"continue it with --resume {self.path}, or delete "
+                               f"{self.staging} to start again")
+        if self.staging.exists():
+            shutil.rmtree(self.staging)  # a failed start: fem_anim's files only
+        self.staging.mkdir()
 
     def file(self, name: str) -> Path:
         """Where to write ``name`` while the run is in progress."""
         return self.staging / name
 
     def commit(self) -> None:
-        """Move every staged file into place (each rename is atomic); drop the checkpoint."""
+        """Install the staged files (each rename atomic), dropping the checkpoint and the
+        pictures of an older run (:func:`fem_anim.rundir.install`); collective."""
+        error = None
         if self.comm.rank == 0:
-            (self.staging / "checkpoint.npz").unlink(missing_ok=True)
-            for name in RENDER_PRODUCTS:
-                old = self.path / name
-                if old.is_dir() and not old.is_symlink():
-                    shutil.rmtree(old)
-                else:
-                    old.unlink(missing_ok=True)
-            for item in self.staging.iterdir():
-                os.replace(item, self.path / item.name)
-            self.staging.rmdir()
-        self.comm.barrier()
-
-    def abandon(self) -> None:
-        """Remove the staging area (and the directory, if the run created nothing else)."""
-        if self.comm.rank == 0 and self.staging.exists():
-            shutil.rmtree(self.staging, ignore_errors=True)
             try:
-                self.path.rmdir()
-            except OSError:
-                pass
+                (self.staging / "checkpoint.npz").unlink(missing_ok=True)
+                for leftover in self.staging.glob(".*.tmp"):  # a write cut short
+                    leftover.unlink()
+                owned = read_manifest(self.path)
+                old_pictures = {name for name in owned
+                                if name.split("/")[0] in RENDER_PRODUCTS}
+                install(self.staging, self.path, replaces=old_pictures)
+            except OSError as err:
+                error = f"the run's results cannot be moved into {self.path}: " \
+                        f"{describe_os_error(err, self.staging)}"
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise FemAnimError(error)
+
+    def close(self) -> None:
+        """Release the directory's lock (also released if the process dies)."""
+        if self._lock is not None:
+            os.close(self._lock)
+            self._lock = None
 
 
 class StatsWriter:
@@ -161,6 +184,7 @@ class StatsWriter:
 
     def __init__(self, path: Path, comm: MPI.Comm, rows: list[dict] = ()):
         self.rank0 = comm.rank == 0
+        self.path = Path(path)
         if self.rank0:
             self._file = open(path, "w", newline="")
             self._writer = csv.DictWriter(self._file, fieldnames=STATS_COLUMNS)
@@ -174,18 +198,12 @@ class StatsWriter:
             self._file.flush()
 
     def close(self) -> None:
+        """Close the file; after a failed write (a full disk) its error was reported."""
         if self.rank0:
-            self._file.close()
-
-
-def write_atomically(path: Path, data: bytes) -> None:
-    """Write a file so that it is either complete or absent: temp file, fsync, rename."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+            try:
+                self._file.close()
+            except OSError:
+                pass
 
 
 class TrajectoryWriter:
@@ -203,7 +221,9 @@ class TrajectoryWriter:
     def __init__(self, path: Path, domain: SimplexMesh, keep_frames: int | None = None):
         self.rank0 = domain.mesh.comm.rank == 0
         self.path = Path(path)
+        self.h5_path = self.path.with_suffix(".h5")
         self.times: list[float] = []
+        self.h5 = None
         if not self.rank0:
             return
         import h5py
@@ -211,12 +231,20 @@ class TrajectoryWriter:
         self.points = _pad3(domain.points)
         self.cells = domain.cells
         if keep_frames is None:
-            self.h5 = h5py.File(self.path.with_suffix(".h5"), "w")
+            self.h5 = h5py.File(self.h5_path, "w")
             self.h5.create_dataset("data0", data=self.points)
             self.h5.create_dataset("data1", data=self.cells)
         else:  # continue a run: keep its first frames, drop the rest
-            self.h5 = h5py.File(self.path.with_suffix(".h5"), "a")
-            self.times = [float(t) for t in self.h5.attrs["times"][:keep_frames]]
+            self.h5 = h5py.File(self.h5_path, "a")
+            stored = self.h5.attrs.get("times", np.zeros(0))
+            if len(stored) < keep_frames or any(f"data{k + 2}" not in self.h5
+                                                for k in range(keep_frames)):
+                self.h5.close()
+                self.h5 = None
+                raise OSError(0, f"holds {len(stored)} frames where the checkpoint expects "
+                              f"{keep_frames} (the run cannot be continued from it)",
+                              str(self.h5_path))
+            self.times = [float(t) for t in stored[:keep_frames]]
             for k in range(keep_frames, len(self.h5.attrs["times"])):
                 del self.h5[f"data{k + 2}"]
                 if f"energy_density{k}" in self.h5:
@@ -265,8 +293,12 @@ class TrajectoryWriter:
             "</Topology></Grid></Domain></Xdmf>\n")
 
     def close(self) -> None:
-        if self.rank0:
-            self.h5.close()
+        """Close the HDF5 file; after a failed write (a full disk) its error was reported."""
+        if self.rank0 and self.h5 is not None:
+            try:
+                self.h5.close()
+            except (OSError, RuntimeError):
+                pass
 
 
 def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None,

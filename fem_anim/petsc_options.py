@@ -3,7 +3,14 @@
 Precedence, lowest to highest: library defaults < solver preset < scene
 ``[solver.petsc]`` < command line. The merged options are put into PETSc's
 database under the solver's prefix only while the solver reads them
-(``setFromOptions``), then removed, so two solvers never see each other's options.
+(``setFromOptions``, and each solve: ``-snes_converged_reason``, ``-ksp_view``, the
+factorisation's ``-mat_mumps_*`` and the sub-solvers' ``-sub_*`` are read there, the last
+two only when the first solve sets the preconditioner up), then removed, so two solvers
+never see each other's options.
+
+Command-line options are held to the scene's standard (:func:`check_cli_options`,
+:func:`unused_options`): values finite, viewers' files writable, and an option that no
+PETSc object read (``-ksp_tpye cg``) an error naming it, as an unknown scene key is.
 
 PETSc must be initialised from ``argv`` before ``dolfinx`` is imported, so that
 global options such as ``-log_view`` take effect; :func:`init_petsc` does that.
@@ -12,8 +19,13 @@ global options such as ``-log_view`` take effect; :func:`init_petsc` does that.
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import math
+import os
 import sys
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+
+from .errors import FemAnimError
 
 __all__ = [
     "DEFAULT_PREFIX",
@@ -23,6 +35,8 @@ __all__ = [
     "flatten_options",
     "merge_options",
     "options_in_database",
+    "check_cli_options",
+    "unused_options",
 ]
 
 DEFAULT_PREFIX = "fem_anim_"
@@ -129,3 +143,93 @@ def options_in_database(prefix: str, options: Mapping[str, str]) -> Iterator[Non
     finally:
         for name in options:
             db.delValue(prefix + name)
+
+
+#: Options fem_anim reads itself (PETSc never reads ``mat_type`` for a matrix the
+#: application creates: :class:`fem_anim.solver.Minimiser` takes it).
+READ_BY_FEM_ANIM = frozenset({"mat_type"})
+
+
+#: Option names ending so take a number (``-snes_rtol abc`` is refused naming it).
+NUMERIC_SUFFIXES = ("_rtol", "_atol", "_stol", "_divtol", "_max_it", "_max_funcs", "_restart",
+                    "_levels", "_damping", "_shift_amount", "_omega", "_its", "_lag_jacobian",
+                    "_lag_preconditioner", "_maxstep", "_minlambda", "_trtol", "_icntl_13")
+
+
+def _viewer_file(value: str) -> str | None:
+    """The file of a viewer value ``[type]:file[:format[:mode]]``, or None."""
+    if ":" not in value:
+        return None
+    return value.split(":")[1] or None
+
+
+def check_cli_options(solver: Mapping[str, str], global_args: list[str]) -> None:
+    """Command-line PETSc options held to the scene's standard, before anything runs.
+
+    Values must be finite where they are numbers (``-ksp_rtol nan``), and a viewer's file
+    (``-log_view :/no/such/dir/f``, ``-ksp_view ascii:out.txt``) must be creatable: its
+    folder must exist and be writable.
+
+    Raises:
+        FemAnimError: naming the option and its value.
+    """
+    pairs = [(f"-{name}", value) for name, value in solver.items()]
+    i = 0
+    while i < len(global_args):
+        value = global_args[i + 1] if i + 1 < len(global_args) and \
+            not global_args[i + 1].startswith("-") else ""
+        pairs.append((global_args[i], value))
+        i += 2 if value else 1
+    for option, value in pairs:
+        try:
+            number = float(value)
+        except ValueError:
+            number = 0.0
+        if not math.isfinite(number):
+            raise FemAnimError(f"PETSc option {option} must be finite, got {value!r}")
+        if option.endswith(NUMERIC_SUFFIXES):
+            try:
+                float(value)
+            except ValueError:
+                raise FemAnimError(f"PETSc option {option} must be a number, got {value!r}") \
+                    from None
+        target = _viewer_file(value)
+        if target is not None:
+            folder = os.path.dirname(os.path.abspath(target))
+            if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+                raise FemAnimError(f"PETSc option {option} {value}: its file {target} cannot "
+                                   f"be created (no writable folder {folder})")
+
+
+def _petsc_library() -> ctypes.CDLL:
+    """The PETSc shared library petsc4py loaded (found in this process's memory map)."""
+    from petsc4py import PETSc  # noqa: F401  (loads the library)
+
+    with open("/proc/self/maps") as maps:
+        for line in maps:
+            path = line.split()[-1]
+            if os.path.basename(path).startswith("libpetsc") and ".so" in path:
+                return ctypes.CDLL(path)
+    raise OSError("the PETSc library is not loaded")
+
+
+def unused_options(prefix: str, names: Iterable[str]) -> list[str]:
+    """Which of ``names`` (without prefix) in PETSc's database no object has read yet.
+
+    petsc4py has no binding of ``PetscOptionsUsed`` (the query behind ``-options_left``);
+    it is called through ctypes on the global database. Call it while the options are in
+    the database (:func:`options_in_database`).
+    """
+    lib = _petsc_library()
+    lib.PetscOptionsUsed.argtypes = [ctypes.c_void_p, ctypes.c_char_p,
+                                     ctypes.POINTER(ctypes.c_int)]
+    unused = []
+    for name in names:
+        if name in READ_BY_FEM_ANIM:
+            continue
+        used = ctypes.c_int(0)
+        if lib.PetscOptionsUsed(None, f"{prefix}{name}".encode(), ctypes.byref(used)) != 0:
+            raise OSError(f"PetscOptionsUsed failed for -{prefix}{name}")
+        if not used.value:
+            unused.append(name)
+    return unused

@@ -54,6 +54,11 @@ def check_consistency(data: dict[str, Any]) -> None:
                          f"got {mesh['origin']}")
     if mesh["shape"] == "file" and mesh["file"] is None:
         raise SceneError("mesh.file is required when mesh.shape = \"file\"")
+    if mesh["file"] is not None and mesh["shape"] != "file":
+        # an error, not a guess: defaults are filled in before this check, so a scene's
+        # explicit shape = "box" and an absent one look alike here
+        raise SceneError(f"mesh.file = {mesh['file']!r} is not used with mesh.shape = "
+                         f"{mesh['shape']!r}: set mesh.shape = \"file\" to simulate the file")
     if mesh["shape"] == "box" and mesh["element_size"] > max(mesh["size"]):
         raise SceneError(f"mesh.element_size must not exceed the box size "
                          f"{max(mesh['size'])}, got {mesh['element_size']}")

@@ -9,6 +9,7 @@ final state. :meth:`Simulation.step` is the single step, usable on its own.
 from __future__ import annotations
 
 import math
+import signal
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -22,9 +23,11 @@ from dolfinx.fem import petsc as fem_petsc
 
 from . import compat
 from .checkpoint import load_checkpoint, save_checkpoint
-from .errors import ConvergenceError, FemAnimError
+from .energy import moving_pins
+from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
 from .initial import initial_velocity
 from .integrator import Integrator, State
+from .interrupt import Interrupts
 from .mesh import SimplexMesh, build_mesh
 from .output import (CellGather, RunDirectory, StatsWriter, TrajectoryWriter, VertexGather,
                      write_final, write_scene)
@@ -114,6 +117,7 @@ class Simulation:
         self.problem = EnergyProblem(scene, self.domain)
         self.integrator = Integrator(scene["time"]["integrator"])
         self.minimiser = Minimiser(self.problem, options, settings=scene["solver"])
+        self.minimiser.require_read(cli_options or {})
         self.gather = VertexGather(self.domain, self.problem.V)
         self.cell_gather = CellGather(self.domain)
         self.clock.add("compile", self.problem.compile_s)
@@ -232,9 +236,10 @@ class Simulation:
         r.destroy()
         step.destroy()
         if not math.isfinite(p.objective(None, x)):
-            raise ConvergenceError(f"{what}: no start for Newton keeps every element "
-                                   "uninverted (the pins move too far in one step): reduce "
-                                   "time.dt")
+            why = "the pins move too far in one step" if moving_pins(self.scene) else \
+                "the motion predicted over one step inverts elements or overflows"
+            raise ConvergenceError(f"{what}: no start for Newton gives a finite step "
+                                   f"objective ({why}): reduce time.dt")
 
     # -- the run --------------------------------------------------------------------------
     def run(self, output_dir: Path | None = None, quiet: bool = False,
@@ -242,33 +247,44 @@ class Simulation:
         """Run ``time.steps`` frames, writing outputs to ``output_dir`` (None: no files).
 
         With ``resume``, continue the unfinished run in ``output_dir`` from its last
-        checkpoint (:mod:`fem_anim.checkpoint`). A run that fails leaves its staging area
-        (frames so far and the last checkpoint) for ``--resume``, but no file posing as a
-        result in ``output_dir``.
+        checkpoint (:mod:`fem_anim.checkpoint`). A run that fails, however it fails (an
+        error, an OS error, SIGINT/SIGTERM/SIGHUP: :mod:`fem_anim.interrupt`), leaves its
+        staging area (frames so far and the last checkpoint) for ``--resume``, but no file
+        posing as a result in ``output_dir``; an interrupted run first writes a
+        checkpoint at the frame it stopped.
+
+        Raises:
+            Interrupted: after a signal, once the checkpoint is written.
+            FemAnimError: for an OS error (naming the file) and every other failure.
         """
         cfg = self.scene["time"]
         h, steps, every = cfg["dt"], cfg["steps"], self.scene["output"]["every"]
         run_dir = RunDirectory(output_dir, self.comm, resume) if output_dir is not None \
             else None
         start = time.perf_counter()
-        try:
-            result = self._loop(h, steps, every, run_dir, quiet, resume)
-        except FemAnimError:
-            raise  # keep the staging area and its checkpoint: the run can be resumed
-        except BaseException:
+        try:  # nothing is deleted on failure: the staging area is what --resume continues
+            with Interrupts(self.comm) as interrupts:
+                try:
+                    result = self._loop(h, steps, every, run_dir, quiet, resume, interrupts)
+                except FemAnimError as err:
+                    if interrupts.received is None or isinstance(err, Interrupted):
+                        raise
+                    name = signal.Signals(interrupts.received).name  # a 2nd signal inside PETSc
+                    raise Interrupted(f"interrupted by {name} (twice)",
+                                      interrupts.received) from None
+            loop_s = time.perf_counter() - start
+            stepping = sum(row["step_wall_s"] for row in result.rows[result.resumed_rows:])
+            self.clock.add("stepping", stepping)
+            self.clock.add("output", loop_s - stepping)  # frames, stats, checkpoints, finals
             if run_dir is not None:
-                run_dir.abandon()
-            raise
-        loop_s = time.perf_counter() - start
-        stepping = sum(row["step_wall_s"] for row in result.rows[result.resumed_rows:])
-        self.clock.add("stepping", stepping)
-        self.clock.add("output", loop_s - stepping)  # frames, stats, checkpoints, final files
-        with self.clock.phase("output"):
+                with self.clock.phase("output"):
+                    run_dir.commit()
+                if self.scene["output"]["render"]:
+                    with self.clock.phase("render"):
+                        self._render(run_dir.path, quiet)
+        finally:
             if run_dir is not None:
-                run_dir.commit()
-        if run_dir is not None and self.scene["output"]["render"]:
-            with self.clock.phase("render"):
-                self._render(run_dir.path, quiet)
+                run_dir.close()
         return result
 
     def _render(self, path: Path, quiet: bool) -> None:
@@ -294,7 +310,20 @@ class Simulation:
         return (self.gather.gather(state.u),
                 self.cell_gather.gather(self.problem.cell_energy_density(state.u)))
 
-    def _loop(self, h, steps, every, run_dir, quiet, resume) -> RunResult:
+    def _io(self, path: Path, write, *args):
+        """``write(*args)`` (rank 0 writes; collective): an OS error becomes one message
+        naming the file, raised on every rank."""
+        error, result = None, None
+        try:
+            result = write(*args)
+        except OSError as err:
+            error = describe_os_error(err, path)
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise FemAnimError(f"{error} (nothing was deleted)")
+        return result
+
+    def _loop(self, h, steps, every, run_dir, quiet, resume, interrupts) -> RunResult:
         stepper = AdaptiveStepper(self, h, self.scene["time"])
         checkpoint_every = self.scene["output"]["checkpoint_every"] or max(1, steps // 10)
         first, rows, kept, resumed_rows = 1, [], None, 0
@@ -307,27 +336,42 @@ class Simulation:
                 self.minimiser.shift.c = ck.shift
         else:
             state = self.initial_state()
-        stats_file = StatsWriter(run_dir.file("stats.csv"), self.comm, rows) if run_dir \
-            else None
-        trajectory = TrajectoryWriter(run_dir.file("trajectory.xdmf"), self.domain, kept) \
-            if run_dir else None
+        stats_file = trajectory = None
+        if run_dir:  # the trajectory first: a resume it refuses leaves stats.csv as it was
+            trajectory = self._io(run_dir.file("trajectory.h5"), TrajectoryWriter,
+                                  run_dir.file("trajectory.xdmf"), self.domain, kept)
+            stats_file = self._io(run_dir.file("stats.csv"), StatsWriter,
+                                  run_dir.file("stats.csv"), self.comm, rows)
+
+        def checkpoint(frame: int) -> None:
+            path = run_dir.file("checkpoint.npz")
+            self._io(path, save_checkpoint, path, self, state, frame,
+                     len(trajectory.times) if trajectory.rank0 else 0, rows,
+                     {"dt": stepper.dt, "last_dt": stepper.last_dt})
+
         progress = Progress(steps, disable=quiet or self.comm.rank != 0)
         progress.update(0, advance=first - 1)
         try:
             if trajectory and not resume:
-                trajectory.write(0.0, *self.frame_fields(state))
+                self._io(trajectory.h5_path, trajectory.write, 0.0, *self.frame_fields(state))
             for frame in range(first, steps + 1):
                 for state, row in stepper.advance(state, frame * h):
                     rows.append(row)
                     if stats_file:
-                        stats_file.write(row)
+                        self._io(stats_file.path, stats_file.write, row)
                 if trajectory and (frame % every == 0 or frame == steps):
-                    trajectory.write(state.time, *self.frame_fields(state))
-                if run_dir and frame % checkpoint_every == 0 and frame < steps:
-                    save_checkpoint(run_dir.file("checkpoint.npz"), self, state, frame,
-                                    len(trajectory.times) if trajectory.rank0 else 0, rows,
-                                    {"dt": stepper.dt, "last_dt": stepper.last_dt})
+                    self._io(trajectory.h5_path, trajectory.write, state.time,
+                             *self.frame_fields(state))
+                saved = run_dir and frame % checkpoint_every == 0 and frame < steps
+                if saved:
+                    checkpoint(frame)
                 progress.update(row["newton_its"])
+                signum = interrupts.pending() if frame < steps else None
+                if signum:
+                    if run_dir and not saved:
+                        checkpoint(frame)
+                    raise Interrupted(f"interrupted by {signal.Signals(signum).name} at frame "
+                                      f"{frame} of {steps} (t = {state.time:.6g} s)", signum)
         finally:
             progress.close()
             if stats_file:
@@ -336,8 +380,10 @@ class Simulation:
                 trajectory.close()
         final, energy_density = self.frame_fields(state)
         if run_dir is not None:
-            write_final(run_dir.file("final.vtu"), self.domain, final, energy_density)
-            write_scene(run_dir.file("scene.json"), self.scene, self.comm)
+            self._io(run_dir.file("final.vtu"), write_final, run_dir.file("final.vtu"),
+                     self.domain, final, energy_density)
+            self._io(run_dir.file("scene.json"), write_scene, run_dir.file("scene.json"),
+                     self.scene, self.comm)
         return RunResult(state, rows, run_dir.path if run_dir else None, final, resumed_rows)
 
     def timed_step(self, state: State, dt: float) -> tuple[State, dict]:

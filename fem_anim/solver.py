@@ -31,7 +31,7 @@ from petsc4py import PETSc
 
 from .errors import ConvergenceError, FemAnimError
 from .hessian import ShiftStrategy
-from .petsc_options import DEFAULT_PREFIX, options_in_database
+from .petsc_options import DEFAULT_PREFIX, options_in_database, unused_options
 from .problem import EVENTS
 
 __all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "NONLINEAR_METHODS"]
@@ -114,12 +114,15 @@ class Minimiser:
         self._decrements: list[float] = []
         PETSc.Log.begin()
         self._events = [PETSc.Log.Event(name) for name in ("PCSetUp", "KSPSolve")]
+        self.options = dict(options)
+        self._unchecked: set[str] = set()  # options that must be read by the first solve
         PETSc.Sys.pushErrorHandler("ignore")
         try:
             with options_in_database(prefix, options):
                 snes.setFromOptions()
                 snes.getKSP().setFromOptions()
                 snes.getKSP().getPC().setFromOptions()
+                self._read = set(options) - set(unused_options(prefix, options))
         except PETSc.Error as err:
             shown = " ".join(f"-{k} {v}".strip() for k, v in sorted(options.items()))
             raise FemAnimError(f"PETSc rejected the solver options (error {err.ierr}): "
@@ -128,6 +131,24 @@ class Minimiser:
             PETSc.Sys.popErrorHandler()
         if snes.getType() in ("newtonls",):
             snes.setLineSearchPreCheck(self._precheck)
+
+    def require_read(self, names) -> None:
+        """Make the first :meth:`solve` fail if one of the options ``names`` (the command
+        line's) was read by no PETSc object by then: a misspelt ``-ksp_tpye`` is an
+        error, as an unknown scene key is. Sub-solvers read theirs only when the first
+        solve sets them up, hence after it."""
+        self._unchecked = set(names) - self._read
+
+    def _check_read(self) -> None:
+        if not self._unchecked:
+            return
+        unused = sorted(unused_options(self.prefix, self._unchecked))
+        self._unchecked = set()
+        if unused:
+            shown = ", ".join(f"-{name}" for name in unused)
+            raise FemAnimError(f"PETSc option {shown} was read by no solver object (misspelt, "
+                               "or for a component this solver does not have): see "
+                               "`fem-anim solvers` and PETSc's manual for the names")
 
     def solve(self, x: PETSc.Vec, what: str = "step") -> SolveStats:
         """Minimise from the initial guess ``x`` (overwritten with the minimiser).
@@ -142,8 +163,10 @@ class Minimiser:
         self._clear_objective_cache()
         g0 = self.objective(self.snes, x)
         PETSc.Sys.pushErrorHandler("ignore")  # reported once, below, not as PETSc's stack
-        try:
-            self.snes.solve(None, x)
+        try:  # the options again: monitors, reasons and views are read by the solve itself
+            with options_in_database(self.prefix, self.options):
+                self.snes.solve(None, x)
+                self._check_read()
         except PETSc.Error as err:
             raise FemAnimError(f"{what}: PETSc failed inside the solver (error {err.ierr}); "
                                "check the solver options (e.g. a serial-only preconditioner "

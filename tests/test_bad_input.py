@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import io
 import math
 import os
 import re
@@ -96,6 +97,35 @@ def _absolute_out(tmp: Path) -> list[str]:
 def _output_is_a_file(tmp: Path) -> list[str]:
     (tmp / "blocker").write_text("not a directory\n")
     return ["-o", str(tmp / "blocker")]
+
+
+def _user_folder(tmp: Path) -> list[str]:
+    """A folder of the user's (not a run directory) given as -o."""
+    (tmp / "mine" / "frames").mkdir(parents=True)
+    (tmp / "mine" / "frames" / "holiday.png").write_bytes(b"user's picture")
+    return ["-o", str(tmp / "mine")]
+
+
+def _mesh_file(name: str, points, blocks) -> Callable[[Path], list[str]]:
+    """Writes ``scenes/NAME`` (gmsh 2.2) for a scene with ``mesh.file = NAME``."""
+    def setup(tmp: Path) -> list[str]:
+        import meshio
+
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+            meshio.write(tmp / "scenes" / name, meshio.Mesh(points, blocks),
+                         file_format="gmsh22", binary=False)
+        return []
+    return setup
+
+
+_CUBE = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1], [1, 1, 1]]
+_TETS = [[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]]
+_CUBE2 = _CUBE + [[x + 2.0, y, z] for x, y, z in _CUBE]
+_UNMERGED = [_CUBE[v] for tet in _TETS for v in tet]
+
+
+def _mesh_scene(name: str) -> str:
+    return f'[mesh]\nshape = "file"\nfile = "{name}"\n[time]\nsteps = 1\n'
 
 
 PIN = "[[pin]]\nmin = [0, 0, 0]\nmax = [0.01, 1, 1]\n"
@@ -301,6 +331,54 @@ CORPUS = [
     # -- --set on a scene file --------------------------------------------------------------
     Bad("set-key-into-list", ("--set pin.first.min: pin is a list; give an entry number",),
         PIN, args=("--set", "pin.first.min=[0, 0, 0]"), fresh=True),
+    # -- issue 15: folders of the user's, command-line PETSc options, mesh files ----------------
+    Bad("output-users-folder", ("output directory", "mine is not empty and is not a fem-anim run "
+                                "directory"), "[time]\nsteps = 1\n", setup=_user_folder,
+        output=False, fresh=True),
+    Bad("output-name-too-long", ("File name too long",), "[time]\nsteps = 1\n",
+        setup=lambda tmp: ["-o", str(tmp / ("x" * 300))], output=False),
+    Bad("resume-elsewhere", ("--resume", "and -o", "name different directories"),
+        "[time]\nsteps = 1\n", args=("--resume", "elsewhere")),
+    Bad("solver-empty", ("--solver needs a preset name", "got ''"), "[time]\nsteps = 1\n",
+        args=("--solver", "")),
+    Bad("solver-blank", ("--solver needs a preset name",), "[time]\nsteps = 1\n",
+        args=("--solver", "  ")),
+    Bad("cli-petsc-nan", ("PETSc option -ksp_rtol must be finite, got 'nan'",),
+        "[time]\nsteps = 1\n", args=("-ksp_rtol", "nan"), fresh=True),
+    Bad("cli-petsc-inf", ("PETSc option -snes_atol must be finite, got 'inf'",),
+        "[time]\nsteps = 1\n", args=("-snes_atol", "inf")),
+    Bad("petsc-word-for-number", ("PETSc option -snes_rtol must be a number, got 'abc'",),
+        "[time]\nsteps = 1\n", args=("-snes_rtol", "abc")),
+    Bad("petsc-max-it-word", ("PETSc option -ksp_max_it must be a number, got 'many'",),
+        "[time]\nsteps = 1\n", args=("-ksp_max_it", "many")),
+    Bad("petsc-unknown-pc", ("PETSc rejected the solver options", "-pc_type nosuch"),
+        "[time]\nsteps = 1\n", args=("-pc_type", "nosuch")),
+    Bad("log-view-no-folder", ("-log_view :/no/such/dir/f", "cannot be created",
+                               "/no/such/dir"),
+        "[time]\nsteps = 1\n", args=("-log_view", ":/no/such/dir/f"), fresh=True),
+    Bad("ksp-view-no-folder", ("-ksp_view ascii:/no/such/dir/k.txt", "cannot be created"),
+        "[time]\nsteps = 1\n", args=("-ksp_view", "ascii:/no/such/dir/k.txt")),
+    Bad("mesh-file-without-shape", ("mesh.file = 'x.msh' is not used with mesh.shape = 'box'",
+                                    'set mesh.shape = "file"'),
+        '[mesh]\nfile = "x.msh"\n', fresh=True),
+    Bad("mesh-mixed-cells", ("mixed.msh mixes cell types", "1 hexahedron cells"),
+        _mesh_scene("mixed.msh"), setup=_mesh_file("mixed.msh", _CUBE2, [
+            ("tetra", _TETS), ("hexahedron", [[8, 9, 11, 10, 12, 13, 15, 14]])])),
+    Bad("mesh-unmerged", ("unmerged.msh is not one body", "6 disconnected pieces",
+                          "16 duplicate vertices"),
+        _mesh_scene("unmerged.msh"), setup=_mesh_file(
+            "unmerged.msh", _UNMERGED, [("tetra", [[4 * c + k for k in range(4)]
+                                                   for c in range(6)])]), fresh=True),
+    Bad("mesh-two-pieces", ("two.msh is not one body", "2 disconnected pieces"),
+        _mesh_scene("two.msh"), setup=_mesh_file(
+            "two.msh", _CUBE2, [("tetra", _TETS + [[v + 8 for v in t] for t in _TETS])])),
+    Bad("mesh-huge-coordinates", ("huge.msh: vertex 1", "beyond 1e+100 in magnitude"),
+        _mesh_scene("huge.msh"), setup=_mesh_file(
+            "huge.msh", [[1e200 * c for c in p] for p in _CUBE], [("tetra", _TETS)]),
+        fresh=True),  # in a fresh process: no numpy overflow warning before the line
+    Bad("mesh-tiny", ("tiny.msh: the mesh is 1e-200 across",),
+        _mesh_scene("tiny.msh"), setup=_mesh_file(
+            "tiny.msh", [[1e-200 * c for c in p] for p in _CUBE], [("tetra", _TETS)])),
 ]
 
 

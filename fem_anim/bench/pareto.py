@@ -130,6 +130,7 @@ def pareto_table(rows: list[dict], front: np.ndarray, keys: list[str]) -> str:
         r = rows[i]
         cells = [f"{r['error_l2']:.2e}", f"{r['error_probe']:.2e}",
                  f"{r['wall_per_sim_s']:.3g}", *[short(r.get(k, "")) for k in keys],
-                 str(r["newton_its"]), f"{100 * r['energy_drift']:+.2g} %"]
+                 str(r["newton_its"]), "at rest" if r["energy_drift"] is None
+                 else f"{100 * r['energy_drift']:+.2g} %"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

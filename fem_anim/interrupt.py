@@ -1,0 +1,54 @@
+"""Signals during a run: stop at the next frame, collectively, keeping everything.
+
+SIGINT (Ctrl-C), SIGTERM and SIGHUP do not kill a run in the middle of a write. The
+handler only notes the signal; the time loop asks :meth:`Interrupts.pending` once per
+frame, an ``allreduce`` so that every rank stops at the same frame (``mpirun`` forwards
+SIGINT and SIGTERM to every rank, not necessarily at the same moment), writes a
+checkpoint there, and raises :class:`~fem_anim.errors.Interrupted`. A second signal
+does not wait for the frame to end: it raises at once (the last periodic checkpoint
+and the frames so far stay on disk either way; nothing is deleted).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+from mpi4py import MPI
+
+from .errors import Interrupted
+
+__all__ = ["Interrupts", "SIGNALS"]
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Interrupts:
+    """Context manager installing the handlers of :data:`SIGNALS` (main thread only)."""
+
+    def __init__(self, comm: MPI.Comm):
+        self.comm = comm
+        self.received: int | None = None
+        self._previous: dict[int, object] = {}
+
+    def __enter__(self) -> Interrupts:
+        if threading.current_thread() is threading.main_thread():
+            for signum in SIGNALS:
+                self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous.clear()
+
+    def _handle(self, signum: int, frame) -> None:
+        if self.received is not None:  # the second signal: stop now
+            raise Interrupted(f"interrupted by {signal.Signals(signum).name} (twice)", signum)
+        self.received = signum
+
+    def pending(self) -> int | None:
+        """The signal every rank stops for, or None (collective: call once per frame)."""
+        mine = self.received if self.received is not None else 0
+        signum = self.comm.allreduce(mine, op=MPI.MAX)
+        return signum or None
