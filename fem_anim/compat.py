@@ -30,6 +30,9 @@ from dolfinx import mesh as dmesh
 __all__ = [
     "vector_space",
     "cell_space",
+    "mixed_space",
+    "collapse_subspace",
+    "set_schur_user_matrix",
     "quadrature_space",
     "petsc_vec",
     "geometry_dofmap",
@@ -42,6 +45,34 @@ __all__ = [
 def vector_space(mesh, degree: int) -> fem.FunctionSpace:
     """Vector-valued continuous Lagrange space of the given degree."""
     return fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+
+
+def mixed_space(mesh, degree_u: int, degree_p: int) -> fem.FunctionSpace:
+    """Mixed space of a vector Lagrange displacement (degree_u) and a scalar Lagrange
+    pressure (degree_p): Taylor-Hood for (2, 1). Later releases:
+    ``basix.ufl.mixed_element([element("Lagrange", cell, k, shape=(gdim,)), element(...)])``.
+    """
+    cell = mesh.ufl_cell()
+    element = ufl.MixedElement([ufl.VectorElement("Lagrange", cell, degree_u),
+                                ufl.FiniteElement("Lagrange", cell, degree_p)])
+    return fem.FunctionSpace(mesh, element)
+
+
+def collapse_subspace(space: fem.FunctionSpace, i: int) -> tuple[fem.FunctionSpace, np.ndarray]:
+    """Sub-space ``i`` of a mixed space as a space of its own, and the map from each of its
+    local dofs (unrolled: block size times nodes, owned and ghost) to the local dof of the
+    mixed space."""
+    sub, dofs = space.sub(i).collapse()
+    return sub, np.asarray(dofs, dtype=np.int32)
+
+
+def set_schur_user_matrix(pc, S) -> None:
+    """``PCFieldSplitSetSchurPre(pc, USER, S)``: petsc4py 3.18 names the enum
+    ``PC.SchurPreType``, later releases ``PC.FieldSplitSchurPreType``."""
+    from petsc4py import PETSc
+
+    kinds = getattr(PETSc.PC, "FieldSplitSchurPreType", None) or PETSc.PC.SchurPreType
+    pc.setFieldSplitSchurPreType(kinds.USER, S)
 
 
 def cell_space(mesh) -> fem.FunctionSpace:

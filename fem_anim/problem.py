@@ -40,12 +40,14 @@ from fem_anim.forms.integrator import SCHEMES, step_objective
 from fem_anim.forms.kinematics import deformation_gradient
 from fem_anim.forms.lame import lame_parameters
 from fem_anim.forms.material import EXTRA_DATA, get_material
+from fem_anim.forms.mixed import MIXED_MATERIALS, compliance, lagrangian
 
 from . import compat
 from .contact import ObstacleContact
 from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh, cell_volumes
+from .mixed import MixedFields, SchurPreconditioner
 from .pin import PinMotion
 from .quadrature import QuadratureData
 from .region import assign_materials
@@ -97,10 +99,17 @@ class EnergyProblem:
         if self.quadrature_degree is None:
             self.quadrature_degree = default_quadrature_degree(degree)
         self.scheme = SCHEMES[scene["time"]["integrator"]]
-        self.material = get_material(scene["material"]["model"])
         self.material_map = None
+        #: element.formulation = "mixed": the unknown is w = (u, p~) (fem_anim.mixed), a saddle
+        #: point; u and v stay displacement Functions, kept equal to w's first field
+        self.mixed = scene["element"].get("formulation", "displacement") == "mixed"
+        self.saddle_point = self.mixed
+        self.fields = MixedFields(mesh, degree) if self.mixed else None
+        self.schur = None
+        # the displacement model (None for mixed: its energy is forms.mixed's Lagrangian)
+        self.material = None if self.mixed else get_material(scene["material"]["model"])
 
-        V = self.V = compat.vector_space(mesh, degree)
+        V = self.V = self.fields.V if self.mixed else compat.vector_space(mesh, degree)
         self.u = fem.Function(V, name="displacement")
         self.u_pred = fem.Function(V, name="predictor")
         self.u_prev = fem.Function(V, name="previous_displacement")
@@ -109,17 +118,26 @@ class EnergyProblem:
         self.u_anchor = fem.Function(V, name="damping_anchor")
 
         mat = scene["material"]
-        mu, lmbda = lame_parameters(mat["youngs_modulus"], mat["poisson_ratio"])
+        if self.mixed and mat["poisson_ratio"] == 0.5:  # lmbda = inf is never formed
+            mu, lmbda = mat["youngs_modulus"] / 3.0, np.inf
+        else:
+            mu, lmbda = lame_parameters(mat["youngs_modulus"], mat["poisson_ratio"])
         self.mu = fem.Constant(mesh, PETSc.ScalarType(mu))
         self.lmbda = fem.Constant(mesh, PETSc.ScalarType(lmbda))
         self.rho = fem.Constant(mesh, PETSc.ScalarType(mat["density"]))
         self.weight = fem.Constant(mesh, PETSc.ScalarType(0.0))
         self.damping_coefficient = fem.Constant(mesh, PETSc.ScalarType(0.0))
+        if self.mixed:
+            self.mixed_material = MIXED_MATERIALS[mat["model"]]
+            self.inv_kappa = fem.Constant(mesh, PETSc.ScalarType(compliance(
+                self.mixed_material, mat["youngs_modulus"], mat["poisson_ratio"], d)))
+            self.mooney_ratio = fem.Constant(mesh, PETSc.ScalarType(mat["mooney_ratio"]))
+            self.p = fem.Function(self.fields.Q, name="pressure")  # p / mu, dimensionless
 
         dx = ufl.Measure("dx", domain=mesh)
         self.dx_elastic = dx(metadata={"quadrature_degree": self.quadrature_degree})
         #: (material, measure) of each elastic integral: one per model in use
-        self.elastic_terms = [(self.material, self.dx_elastic)]
+        self.elastic_terms = [] if self.mixed else [(self.material, self.dx_elastic)]
         self.W0 = compat.cell_space(mesh)  # per-cell data: region parameters, energy density
         if scene.get("region"):
             self._regions()
@@ -134,6 +152,11 @@ class EnergyProblem:
         self._extra: dict = {}  # displacement Function -> the material's quadrature data
         self._quadrature_inputs: list[np.ndarray] | None = None  # their arrays at the refresh
         elastic_u = self._elastic_energy(self.u)
+        # the objective's displacement: u itself, or the first field of the mixed unknown
+        u_obj = self.u
+        if self.mixed:
+            elastic_u = self._mixed_energy(self.u, self.p)
+            u_obj = self.fields.u
         gravity_u = None
         self.g = None
         if "gravity" in scene.data:
@@ -157,23 +180,31 @@ class EnergyProblem:
             potential = ufl.derivative(at_prev, self.u_prev, self.u)
             if self.contact is not None:  # the barrier stays implicit: it guards d > 0
                 potential += self.contact.energy
+        if self.mixed:  # the same potential, of the mixed unknown (no contact: refused)
+            potential = self._mixed_energy(u_obj, self.fields.p)
+            if gravity_u is not None:
+                potential += gravity_forms.gravity_potential(u_obj, self.rho, self.g,
+                                                             self.dx_load)
         contact_terms = None
         if self.contact is not None:
             contact_terms = self.contact.energy if self.contact.friction is None else \
                 self.contact.energy + self.contact.friction
             if self.contact.friction is not None:
                 potential += self.contact.friction
-        convex = inertia_forms.inertia(self.u, self.u_pred, self.rho, self.dx_mass)
-        du, dv = ufl.TrialFunction(V), ufl.TestFunction(V)
+        convex = inertia_forms.inertia(u_obj, self.u_pred, self.rho, self.dx_mass)
+        unknown = self.fields.w if self.mixed else self.u
+        du, dv = ufl.TrialFunction(unknown.function_space), ufl.TestFunction(
+            unknown.function_space)
+        du_V, dv_V = (ufl.TrialFunction(V), ufl.TestFunction(V)) if self.mixed else (du, dv)
         ufl_forms = {}
         if "damping" in scene.data:
             convex += self._dissipation(self.u, self.u_anchor, self.damping_coefficient)
             zero = ufl.as_vector([0.0] * d)
             ufl_forms["damping_force"] = ufl.derivative(
-                self._dissipation(self.v, zero, 1.0), self.v, dv)
+                self._dissipation(self.v, zero, 1.0), self.v, dv_V)
         objective = step_objective(convex, potential, self.weight)
-        residual = ufl.derivative(objective, self.u, dv)
-        jacobian = ufl.derivative(residual, self.u, du)
+        residual = ufl.derivative(objective, unknown, dv)
+        jacobian = ufl.derivative(residual, unknown, du)
         solver = scene["solver"]
         self.tangent_data = None
         if solver["hessian"] == "project" and not self.scheme.explicit:
@@ -188,7 +219,8 @@ class EnergyProblem:
             jacobian += self.weight * correction  # sphere barriers: PSD-projected Hessian
         self.filter_inversion = solver["inversion_filter"]
         if self.filter_inversion is None:
-            self.filter_inversion = any(m.requires_positive_J for m, _ in self.elastic_terms)
+            self.filter_inversion = self.mixed or any(m.requires_positive_J
+                                                      for m, _ in self.elastic_terms)
         self.det_data = None
         self.det_dofs = None  # quadrature dofs the filter watches (None: all)
         if self.filter_inversion:
@@ -202,8 +234,8 @@ class EnergyProblem:
             "jacobian": jacobian,
             "kinetic": inertia_forms.kinetic_energy(self.v, self.rho, self.dx_mass),
             "elastic": elastic_u,
-            "mass": self.rho * ufl.inner(du, dv) * self.dx_mass,
-            "potential_gradient": ufl.derivative(potential_u, self.u, dv),
+            "mass": self.rho * ufl.inner(du_V, dv_V) * self.dx_mass,
+            "potential_gradient": ufl.derivative(potential_u, self.u, dv_V),
         }
         if gravity_u is not None:
             ufl_forms["gravity"] = gravity_u
@@ -214,6 +246,10 @@ class EnergyProblem:
         q = ufl.TestFunction(self.W0)
         ufl_forms["cell_elastic"] = sum(self._psi(self.u, material=m) * q * dx
                                         for m, dx in self.elastic_terms)
+        if self.mixed:
+            ufl_forms["cell_elastic"] = self._mixed_energy(self.u, self.p, q)
+            p_trial, p_test = ufl.split(du)[-1], ufl.split(dv)[-1]
+            ufl_forms["pressure_mass"] = p_trial * p_test * self.dx_elastic
         self.ufl_objective = objective
         self.ufl_elastic = elastic_u
         self.assembly_s = 0.0  # wall time spent assembling (objective, residual, Jacobian)
@@ -229,8 +265,13 @@ class EnergyProblem:
         self.cell_elastic_form = compiled["cell_elastic"]
         self._cell_volumes = None
 
+        self.unknown = unknown
         self.bcs = self._pins()
-        self.x_work = compat.petsc_vec(self.u).duplicate()
+        self.x_work = compat.petsc_vec(unknown).duplicate()
+        if self.mixed:
+            mu_value, inv_kappa = float(self.mu.value), float(self.inv_kappa.value)
+            self.schur = SchurPreconditioner(self.fields, compiled["pressure_mass"],
+                                             mu_value * (1.0 + mu_value * inv_kappa))
 
     # -- construction helpers -------------------------------------------------------------
     def _regions(self) -> None:
@@ -308,6 +349,12 @@ class EnergyProblem:
     def _elastic_energy(self, u):
         return sum(self._psi(u, material=m) * dx for m, dx in self.elastic_terms)
 
+    def _mixed_energy(self, u, p_scaled, q=1.0):
+        """int q W(F(u), mu p~) dX, W the perturbed Lagrangian (:mod:`fem_anim.forms.mixed`)."""
+        W = lagrangian(self.mixed_material, deformation_gradient(u), self.mu * p_scaled,
+                       self.mu, self.inv_kappa, self.mooney_ratio)
+        return W * q * self.dx_elastic
+
     def _projected_elastic_hessian(self, du, dv):
         """w int grad(v) : A+ : grad(du), A+ the PSD projection of d^2 psi/dF^2."""
         d = self.d
@@ -349,7 +396,8 @@ class EnergyProblem:
             if self.comm.allreduce(owned.size, op=MPI.SUM) == 0:
                 raise SceneError(f"pin[{i}] ({pin['name']}): the box min {pin['min']}, max "
                                  f"{pin['max']} contains no mesh vertex")
-            bcs.append(fem.dirichletbc(self.u_bc, dofs))
+            bcs.append(self.fields.dirichletbc(self.u_bc, dofs) if self.mixed
+                       else fem.dirichletbc(self.u_bc, dofs))
             if pin["velocity"] is not None or pin["angular_velocity"] != 0:
                 self.moving_pins.append(PinMotion.from_scene(pin, dofs, coordinates_i))
         return bcs
@@ -371,10 +419,24 @@ class EnergyProblem:
     # -- assembly -------------------------------------------------------------------------
     def set_state(self, x: PETSc.Vec) -> None:
         """Copy a solver iterate into ``u`` (with ghosts) and refresh quadrature data."""
-        u = compat.petsc_vec(self.u)
+        u = compat.petsc_vec(self.unknown)
         x.copy(u)
         u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        if self.mixed:
+            self.fields.scatter(self.u, self.p)
         self.update_quadrature_data()
+
+    def load_guess(self, u: np.ndarray, x: PETSc.Vec, apply_bcs: bool = True) -> None:
+        """An initial guess into ``x`` from displacement values ``u`` (local dofs of V),
+        with the pinned values if ``apply_bcs``; a mixed guess keeps the last pressure."""
+        if self.mixed:
+            self.fields.set_displacement(u)
+        else:
+            self.u.x.array[:] = u
+        vec = compat.petsc_vec(self.unknown)
+        if apply_bcs:
+            fem_petsc.set_bc(vec, self.bcs)
+        vec.copy(x)
 
     def update_quadrature_data(self) -> None:
         """Refresh the material's quadrature data, unless its inputs are unchanged.
@@ -453,6 +515,8 @@ class EnergyProblem:
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.jacobian_form, self.bcs)
         A.assemble()
+        if self.schur is not None:
+            self.schur.update(float(self.weight.value))
         EVENTS["jacobian"].end()
         self.assembly_s += time.perf_counter() - start
 
@@ -467,8 +531,14 @@ class EnergyProblem:
         """
         A = fem_petsc.create_matrix(self.jacobian_form, mat_type)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        A.setNearNullSpace(self.rigid_body_modes())
+        if not self.mixed:  # the modes of the displacement block only: not set for (u, p)
+            A.setNearNullSpace(self.rigid_body_modes())
         return A
+
+    def configure_preconditioner(self, pc: PETSc.PC) -> None:
+        """Give a ``fieldsplit`` PC the fields of a mixed problem (``schur`` preset)."""
+        if self.schur is not None and pc.getType() == "fieldsplit":
+            self.schur.configure(pc)
 
     def rigid_body_modes(self) -> PETSc.NullSpace:
         """Translations and infinitesimal rotations of the body, orthonormalised."""

@@ -19,6 +19,15 @@ the solver's prefix (default ``fem_anim_``), merged with the precedence of
 * obstacles (``[[obstacle]]``): the pre-check scales the Newton direction so that no
   line-search trial brings a contact point onto an obstacle
   (:meth:`fem_anim.contact.ObstacleContact.step_bound`).
+
+A saddle point (``problem.saddle_point``: ``element.formulation = "mixed"``,
+:mod:`fem_anim.mixed`) is not a minimum of g, so g cannot judge a step: SNES gets no
+objective, and the line search (``bt``) backtracks on the merit function ||r||^2/2, whose
+Newton direction is always a descent direction (d/dalpha ||r(x - alpha y)||^2/2 = -||r||^2 at
+alpha = 0). Stopping is by the residual norms only; the round-off test on g is off, and
+the reported Newton decrement is NaN: r^T H^-1 r of an indefinite H is no bound on
+anything (``solver.stopping = "decrement"`` is refused for it). The inversion filter works
+as for a minimisation (it looks at the step, not at g).
 """
 
 from __future__ import annotations
@@ -106,7 +115,9 @@ class Minimiser:
         snes = self.snes = PETSc.SNES().create(problem.comm)
         snes.setOptionsPrefix(prefix)
         self._g_cache: list[tuple[PETSc.Vec, float]] = []
-        snes.setObjective(self.objective)
+        self.saddle = getattr(problem, "saddle_point", False)
+        if not self.saddle:
+            snes.setObjective(self.objective)
         snes.setFunction(problem.residual, self.b)
         snes.setJacobian(self._jacobian, self.A)
         snes.setConvergenceTest(self._converged)
@@ -128,6 +139,13 @@ class Minimiser:
             PETSc.Sys.popErrorHandler()
         if snes.getType() in ("newtonls",):
             snes.setLineSearchPreCheck(self._precheck)
+        # a fieldsplit PC learns its fields from the problem, and reads its sub-solvers'
+        # options when it is set up (the first solve): they are in the database then
+        self.options = options
+        pc = snes.getKSP().getPC()
+        self._split = pc.getType() == "fieldsplit"
+        if self._split and hasattr(problem, "configure_preconditioner"):
+            problem.configure_preconditioner(pc)
 
     def solve(self, x: PETSc.Vec, what: str = "step") -> SolveStats:
         """Minimise from the initial guess ``x`` (overwritten with the minimiser).
@@ -143,7 +161,11 @@ class Minimiser:
         g0 = self.objective(self.snes, x)
         PETSc.Sys.pushErrorHandler("ignore")  # reported once, below, not as PETSc's stack
         try:
-            self.snes.solve(None, x)
+            if self._split:
+                with options_in_database(self.prefix, self.options):
+                    self.snes.solve(None, x)
+            else:
+                self.snes.solve(None, x)
         except PETSc.Error as err:
             raise FemAnimError(f"{what}: PETSc failed inside the solver (error {err.ierr}); "
                                "check the solver options (e.g. a serial-only preconditioner "
@@ -152,7 +174,7 @@ class Minimiser:
             PETSc.Sys.popErrorHandler()
         reason = self.snes.getConvergedReason()
         stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
-            self._at_objective_roundoff(x, g0)
+            not self.saddle and self._at_objective_roundoff(x, g0)
         norm = self.snes.getFunctionNorm()
         if reason == ROUNDOFF_REASON or stalled:
             reason, norm = self._polish(x)
@@ -209,7 +231,7 @@ class Minimiser:
         """
         _, _, fnorm = norms
         rtol, atol, _, max_it = snes.getTolerances()
-        g = self.objective(snes, snes.getSolution())
+        g = np.nan if self.saddle else self.objective(snes, snes.getSolution())
         if it == 0:
             self._history = []
         self._history.append((fnorm, g))
@@ -224,7 +246,7 @@ class Minimiser:
             return R.CONVERGED_FNORM_ABS
         elif fnorm <= rtol * self._history[0][0]:
             return R.CONVERGED_FNORM_RELATIVE
-        if it > 0:
+        if it > 0 and not self.saddle:
             f_prev, g_prev = self._history[-2]
             if fnorm > 0.5 * f_prev and abs(g_prev - g) <= _resolution(g, g_prev):
                 return ROUNDOFF_REASON
@@ -239,7 +261,7 @@ class Minimiser:
         residual r at x is in ``self.b``: lambda^2 = r . y (seed definition 4). With the
         inversion filter on, y is halved until x - y has det F > 0 everywhere.
         """
-        self._decrements.append(0.5 * abs(self.b.dot(y)))
+        self._decrements.append(np.nan if self.saddle else 0.5 * abs(self.b.dot(y)))
         scaled = self._contact_bound(x, y)
         if not self.problem.filter_inversion:
             return scaled
