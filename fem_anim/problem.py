@@ -98,6 +98,9 @@ class EnergyProblem:
         self.quadrature_degree = scene["element"]["quadrature_degree"]
         if self.quadrature_degree is None:
             self.quadrature_degree = default_quadrature_degree(degree)
+            if scene["element"].get("formulation") == "mixed":
+                # int q (J - 1) exact for P_{k-1} q: the total volume is kept exactly
+                self.quadrature_degree = max(self.quadrature_degree, 1 + d * (degree - 1))
         self.scheme = SCHEMES[scene["time"]["integrator"]]
         self.material_map = None
         #: element.formulation = "mixed": the unknown is w = (u, p~) (fem_anim.mixed), a saddle
