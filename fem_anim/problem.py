@@ -269,7 +269,11 @@ class EnergyProblem:
         self._cell_volumes = None
 
         self.unknown = unknown
-        self.bcs = self._pins()
+        #: the pins on V (mass, initial acceleration) and on the unknown (the step): the same
+        #: conditions unless the unknown is the mixed w
+        self.displacement_bcs = self._pins()
+        self.bcs = [self.fields.dirichletbc(self.u_bc, dofs) for dofs in self._pin_dofs] \
+            if self.mixed else self.displacement_bcs
         self.x_work = compat.petsc_vec(unknown).duplicate()
         if self.mixed:
             mu_value, inv_kappa = float(self.mu.value), float(self.inv_kappa.value)
@@ -384,6 +388,7 @@ class EnergyProblem:
     def _pins(self) -> list:
         bcs = []
         self.moving_pins: list[PinMotion] = []
+        self._pin_dofs: list[np.ndarray] = []  # nodes of V held by each pin
         coordinates = self.V.tabulate_dof_coordinates()[:, : self.d]
         for i, pin in enumerate(self.scene["pin"]):
             lo = np.asarray(pin["min"], dtype=float)
@@ -399,8 +404,8 @@ class EnergyProblem:
             if self.comm.allreduce(owned.size, op=MPI.SUM) == 0:
                 raise SceneError(f"pin[{i}] ({pin['name']}): the box min {pin['min']}, max "
                                  f"{pin['max']} contains no mesh vertex")
-            bcs.append(self.fields.dirichletbc(self.u_bc, dofs) if self.mixed
-                       else fem.dirichletbc(self.u_bc, dofs))
+            bcs.append(fem.dirichletbc(self.u_bc, dofs))
+            self._pin_dofs.append(dofs)
             if pin["velocity"] is not None or pin["angular_velocity"] != 0:
                 self.moving_pins.append(PinMotion.from_scene(pin, dofs, coordinates_i))
         return bcs
