@@ -103,7 +103,7 @@ def test_exactly_incompressible_body_keeps_its_volume(tmp_path, model, exact_vol
     (sqrt(N_p) ||r|| / (w mu), from the residual norm where Newton stopped). For g = J - 1 that is the total volume; for neo-Hookean's g = ln J
     the volume changes at second order. J is not kept cell by cell: with a tip sag of 0.2 m
     (stable neo-Hookean) the root mean square of J - 1 is 4.8 %, 3.5 %, 2.4 % and the worst
-    cell mean 6.8 %, 8.3 %, 13.6 % at element sizes 0.25, 0.125, 0.0625 m (measured): the
+    cell mean 6.9 %, 8.3 %, 13.7 % at element sizes 0.25, 0.125, 0.0625 m (measured): the
     mean square error falls, the worst cell is at the clamped corners, where the pressure is
     singular and gets worse as cells shrink there. Bounds here: the 0.25 m mesh.
     """
@@ -156,14 +156,15 @@ def test_schur_preset_gives_the_ldlt_steps(tmp_path):
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("preset", ["ldlt", "schur"])
+@pytest.mark.parametrize("preset", ["ldlt", pytest.param("schur", marks=pytest.mark.slow)])
 def test_mixed_run_under_mpi_equals_serial(tmp_path, preset):
-    """The 3D bar at nu = 0.5 (stable neo-Hookean), 4 steps, mpirun -n 2 against serial."""
+    """The default 3D bar at nu = 0.5 (stable neo-Hookean), 3 steps, mpirun -n 2 against
+    serial (the schur variant, BoomerAMG and fieldsplit index sets across ranks: slow)."""
     from test_mpi_runs import assert_same_run, run
 
     if mpirun_command(2) is None:
         pytest.skip("mpirun not available")
-    args = ["run", "-q", "--set", "time.steps=4", "--set", "output.render=false",
+    args = ["run", "-q", "--set", "time.steps=3", "--set", "output.render=false",
             "--set", "mesh.element_size=0.1", "--set", "element.degree=2",
             "--set", 'element.formulation="mixed"', "--set", "material.poisson_ratio=0.5",
             "--set", 'material.model="stable_neohookean"', "--solver", preset]
