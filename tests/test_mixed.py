@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import ufl
 from conftest import mpirun_command
 from scenes import beam, make_scene, wall_pin
@@ -174,3 +175,63 @@ def test_mixed_run_under_mpi_equals_serial(tmp_path, preset):
         r = run([*args, "-o", str(outs[ranks])], tmp_path, ranks)
         assert r.returncode == 0, r.stderr
     assert_same_run(outs[1], outs[2])
+
+
+# -- the numpy reference (fem_anim/reference/mixed.py) -----------------------------------------
+@pytest.mark.skipif(__import__("mpi4py").MPI.COMM_WORLD.size > 1, reason="serial reference")
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("model", ["neohookean", "stable_neohookean", "mooney_rivlin"])
+def test_mixed_energy_matches_the_numpy_reference(d, model):
+    """Pi(x, p), its gradient and Hessian on a P1/P1 mixed space against the reference: the
+    same UFL energy (forms.mixed.lagrangian) the solver binds, at a perturbed state with a
+    random pressure; 1/kappa > 0 so that the pressure block is tested too. Tolerance 1e4 eps
+    relative to the largest entry, as ASSEMBLY_RTOL in test_reference_comparison.py."""
+    from dolfinx import fem
+    from dolfinx.fem import petsc as fem_petsc
+    from mpi4py import MPI
+
+    from fem_anim import reference
+    from fem_anim.forms.mixed import lagrangian
+    from fem_anim.mesh import mesh_from_arrays
+    from fem_anim.output import VertexGather
+    from fem_anim.reference.mixed import mixed_energy, mixed_gradient, mixed_hessian
+
+    points, cells = reference.box_mesh((3,) * d, (1.0,) + (0.5,) * (d - 1))
+    domain = mesh_from_arrays(MPI.COMM_SELF, points, cells, None, "mixed reference")
+    mu, inv_kappa, ratio = 2.0, 0.3, 0.3
+    W = compat.mixed_space(domain.mesh, 1, 1)
+    V, u_dofs = compat.collapse_subspace(W, 0)
+    Q, p_dofs = compat.collapse_subspace(W, 1)
+    nodes_V, nodes_Q = VertexGather(domain, V).node_to_dof, VertexGather(domain, Q).node_to_dof
+    n_vertices = points.shape[0]
+    order = np.empty(points.size + n_vertices, dtype=np.int64)  # reference dof -> W dof
+    vertices = domain.input_index
+    order[(vertices[:, None] * d + np.arange(d)).ravel()] = \
+        u_dofs[(nodes_V[:, None] * d + np.arange(d)).ravel()]
+    order[points.size + vertices] = p_dofs[nodes_Q]
+    rng = np.random.default_rng(17)
+    x = points.ravel() + 0.01 * rng.standard_normal(points.size)
+    p = rng.standard_normal(n_vertices)
+    w = fem.Function(W)
+    w.x.array[order] = np.concatenate([x - points.ravel(), p])
+    u_w, p_w = ufl.split(w)
+    dx = ufl.Measure("dx", domain=domain.mesh, metadata={"quadrature_degree": 2})
+    energy = lagrangian(MIXED_MATERIALS[model], deformation_gradient(u_w), p_w, mu, inv_kappa,
+                        ratio) * dx
+    dw, dw2 = ufl.TestFunction(W), ufl.TrialFunction(W)
+    forms = compat.compile_forms_together(
+        {"energy": energy, "gradient": ufl.derivative(energy, w, dw),
+         "hessian": ufl.derivative(ufl.derivative(energy, w, dw), w, dw2)}, {})
+    args = (points, cells, model, mu, inv_kappa, x, p, ratio)
+    rtol = 1e4 * np.finfo(float).eps
+    assert fem.assemble_scalar(forms["energy"]) == pytest.approx(mixed_energy(*args), rel=rtol)
+    gradient = fem_petsc.assemble_vector(forms["gradient"]).array[order]
+    expected = mixed_gradient(*args)
+    assert np.abs(gradient - expected).max() <= rtol * np.abs(expected).max()
+    A = fem_petsc.assemble_matrix(forms["hessian"])
+    A.assemble()
+    indptr, indices, data = A.getValuesCSR()
+    inverse = np.argsort(order)
+    H = sp.csr_matrix((data, inverse[indices], indptr), shape=A.getSize())[order]
+    expected_H = mixed_hessian(*args)
+    assert abs(H - expected_H).max() <= rtol * abs(expected_H).max()
