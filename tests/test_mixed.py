@@ -235,3 +235,17 @@ def test_mixed_energy_matches_the_numpy_reference(d, model):
     H = sp.csr_matrix((data, inverse[indices], indptr), shape=A.getSize())[order]
     expected_H = mixed_hessian(*args)
     assert abs(H - expected_H).max() <= rtol * abs(expected_H).max()
+
+
+# -- the extremes suite (fem_anim/bench/extremes.py) ------------------------------------------
+def test_mixed_rows_of_the_locking_table_do_not_lock():
+    """2D cantilever, E = 1e7 Pa, settled under gravity: the mixed element at element size
+    0.1 against itself at 0.05 within 2 % for nu = 0.49 ... 0.5, and within 5 % of plane-strain
+    beam theory (P1 at nu = 0.4999 reaches 0.12 of it: tests/test_extremes.py)."""
+    from fem_anim.bench.extremes import mixed_locking_rows
+
+    rows = mixed_locking_rows(full=False)
+    assert [r["nu"] for r in rows] == [0.49, 0.499, 0.4999, 0.5]
+    for r in rows:
+        assert abs(r["ratio"] - 1.0) < 0.02, r
+        assert abs(r["reference"] / r["beam_theory"] - 1.0) < 0.05, r
