@@ -17,6 +17,17 @@ scalar forms over the same measures.
 
 The unknown is the displacement u = x - X (x deformed, X rest positions); pinned dofs
 are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins).
+
+With ``element.formulation = "mixed"`` (:mod:`fem_anim.mixed`) the unknown is instead
+w = (u, p / mu) in the Taylor-Hood space P2 x P1, and the elastic term is the perturbed
+Lagrangian int psi_dev(F) + p g(J) - p^2 / (2 kappa) of :mod:`fem_anim.forms.mixed`: the
+objective is stationary, not minimal, at the step's solution (the solver then uses no
+objective, :mod:`fem_anim.solver`). :attr:`u`, the predictor, velocity and the reported
+energies stay on the displacement space V; :meth:`set_state` copies w's fields into
+:attr:`u` and :attr:`p`. The elastic energy reported is int W(F(u), p) at the solution, the
+stored energy of the discrete constrained body. The default quadrature degree is raised
+to 1 + d (k - 1) so that int q (J - 1) dX is integrated exactly: with g = J - 1 the total
+volume is kept exactly, up to the solver tolerance.
 """
 
 from __future__ import annotations

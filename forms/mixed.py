@@ -21,16 +21,15 @@ unknown ``p`` (Pa) enters linearly in the constraint and quadratically with the 
 solids are the same code. ``W`` is convex in ``F`` only through ``psi_dev`` and concave in
 ``p``: a discrete step is a saddle point, not a minimum.
 
-The split of each model is exact (for ``nu < 0.5`` eliminating ``p`` gives back the
-displacement model of the same name, so both formulations converge to the same solution):
+The split of each model is exact: for ``nu < 0.5`` eliminating ``p`` gives back the
+displacement model of the same name (:mod:`.neohookean`, :mod:`.stable_neohookean`; so both
+formulations converge to the same solution), and Mooney-Rivlin exists only here:
 
-=================  ========================================================  ========  =====================
-model              psi_dev                                                   g(J)      kappa
-=================  ========================================================  ========  =====================
-neohookean         mu/2 (I_C - d) - mu ln J                                  ln J      lmbda
-stable_neohookean  mu'/2 (I_C - d) - mu'/2 ln((I_C + 1)/(d + 1)) - mu (J-1)  J - 1     lmbda' (remapped)
-mooney_rivlin      c10 (I1bar - 3) + c01 (I2bar - 3)  (:mod:`.mooney_rivlin`)   J - 1     lmbda + 2/3 mu
-=================  ========================================================  ========  =====================
+* neohookean: ``psi_dev = mu/2 (I_C - d) - mu ln J``, ``g = ln J``, ``kappa = lmbda``;
+* stable_neohookean: ``psi_dev = mu'/2 (I_C - d) - mu'/2 ln((I_C + 1)/(d + 1)) - mu (J - 1)``,
+  ``g = J - 1``, ``kappa = lmbda'`` (the remapped Lame parameter);
+* mooney_rivlin: ``psi_dev = c10 (I1bar - 3) + c01 (I2bar - 3)`` (:mod:`.mooney_rivlin`),
+  ``g = J - 1``, ``kappa = lmbda + 2/3 mu``
 
 (stable neo-Hookean: expand ``lmbda'/2 (J - alpha)^2`` about ``J = 1`` with
 ``lmbda' (alpha - 1) = mu``; ``mu' = (d+1)/d mu`` as in :mod:`.stable_neohookean`.) With

@@ -21,6 +21,7 @@ import pytest
 import scipy.sparse as sp
 import ufl
 from conftest import mpirun_command
+from mpi4py import MPI
 from scenes import beam, make_scene, wall_pin
 
 from fem_anim import compat
@@ -74,7 +75,8 @@ class VolumeProbe:
         # the constraint as the problem integrates it (exactly, for polynomial g)
         constraint = MIXED_MATERIALS[model].constraint(J) * p.dx_elastic
         forms = {"volume": J * dx, "constraint": constraint,
-                 "rest": 1.0 * dx, "l2": (J - 1.0) ** 2 * dx, "cells": (J - 1.0) * q * dx, "cell_volume": q * dx}
+                 "rest": 1.0 * dx, "l2": (J - 1.0) ** 2 * dx, "cells": (J - 1.0) * q * dx,
+                 "cell_volume": q * dx}
         self.forms = compat.compile_forms_together(forms, {})
         from dolfinx.fem import petsc as fem_petsc
 
@@ -90,7 +92,7 @@ class VolumeProbe:
         constraint = self.p.assemble_scalar(self.forms["constraint"]) / self.rest
         mean = self._vector(self.forms["cells"]).array / \
             self._vector(self.forms["cell_volume"]).array
-        worst = self.p.comm.allreduce(float(np.abs(mean).max()), op=__import__("mpi4py").MPI.MAX)
+        worst = self.p.comm.allreduce(float(np.abs(mean).max()), op=MPI.MAX)
         return volume, constraint, worst, rms
 
 
@@ -101,8 +103,8 @@ def test_exactly_incompressible_body_keeps_its_volume(tmp_path, model, exact_vol
     """nu = 0.5 (1/kappa = 0): a beam sagging under gravity for 6 steps of 1/30 s.
 
     The weak constraint with q = 1 is int g(J) dX = 0: to solver tolerance at every step
-    (sqrt(N_p) ||r|| / (w mu), from the residual norm where Newton stopped). For g = J - 1 that is the total volume; for neo-Hookean's g = ln J
-    the volume changes at second order. J is not kept cell by cell: with a tip sag of 0.2 m
+    (sqrt(N_p) ||r|| / (w mu), from the residual norm where Newton stopped). For g = J - 1
+    that is the total volume; for neo-Hookean's g = ln J the volume changes at second order. J is not kept cell by cell: with a tip sag of 0.2 m
     (stable neo-Hookean) the root mean square of J - 1 is 4.8 %, 3.5 %, 2.4 % and the worst
     cell mean 6.9 %, 8.3 %, 13.7 % at element sizes 0.25, 0.125, 0.0625 m (measured): the
     mean square error falls, the worst cell is at the clamped corners, where the pressure is
@@ -178,7 +180,7 @@ def test_mixed_run_under_mpi_equals_serial(tmp_path, preset):
 
 
 # -- the numpy reference (fem_anim/reference/mixed.py) -----------------------------------------
-@pytest.mark.skipif(__import__("mpi4py").MPI.COMM_WORLD.size > 1, reason="serial reference")
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial reference")
 @pytest.mark.parametrize("d", [2, 3])
 @pytest.mark.parametrize("model", ["neohookean", "stable_neohookean", "mooney_rivlin"])
 def test_mixed_energy_matches_the_numpy_reference(d, model):
@@ -188,7 +190,6 @@ def test_mixed_energy_matches_the_numpy_reference(d, model):
     relative to the largest entry, as ASSEMBLY_RTOL in test_reference_comparison.py."""
     from dolfinx import fem
     from dolfinx.fem import petsc as fem_petsc
-    from mpi4py import MPI
 
     from fem_anim import reference
     from fem_anim.forms.mixed import lagrangian
