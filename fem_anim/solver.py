@@ -24,10 +24,10 @@ A saddle point (``problem.saddle_point``: ``element.formulation = "mixed"``,
 :mod:`fem_anim.mixed`) is not a minimum of g, so g cannot judge a step: SNES gets no
 objective, and the line search (``bt``) backtracks on the merit function ||r||^2/2, whose
 Newton direction is always a descent direction (d/dalpha ||r(x - alpha y)||^2/2 = -||r||^2 at
-alpha = 0). Stopping is by the residual norms only; the round-off test on g is off, and
-the reported Newton decrement is NaN: r^T H^-1 r of an indefinite H is no bound on
-anything (``solver.stopping = "decrement"`` is refused for it). The inversion filter works
-as for a minimisation (it looks at the step, not at g).
+alpha = 0). Stopping is by the residual norms only (the round-off test on g becomes one on
+||r||, :data:`SADDLE_FLOOR`), and the reported Newton decrement is NaN: r^T H^-1 r of an
+indefinite H is no bound on anything (``solver.stopping = "decrement"`` is refused for
+it). The inversion filter works as for a minimisation (it looks at the step, not at g).
 """
 
 from __future__ import annotations
@@ -65,6 +65,10 @@ ROUNDOFF_ULPS = 4096.0
 #: Reason recorded when the Newton-decrement test stopped the iteration: PETSc's
 #: CONVERGED_ITS ("converged by a user test"; a plain iteration cap is DIVERGED_MAX_IT).
 DECREMENT_REASON = 5
+#: A saddle point's Newton is at its round-off floor when an iteration no longer halves
+#: ||r|| although ||r|| is already this far below its first value (quadratic convergence
+#: would go on): it stops with ROUNDOFF_REASON and :meth:`Minimiser._polish` finishes.
+SADDLE_FLOOR = 1e-6
 
 
 @dataclass
@@ -250,6 +254,10 @@ class Minimiser:
             f_prev, g_prev = self._history[-2]
             if fnorm > 0.5 * f_prev and abs(g_prev - g) <= _resolution(g, g_prev):
                 return ROUNDOFF_REASON
+        elif it > 0:  # a saddle point: judged by ||r|| alone (no g to see round-off in)
+            f_prev = self._history[-2][0]
+            if fnorm > 0.5 * f_prev and fnorm <= SADDLE_FLOOR * self._history[0][0]:
+                return ROUNDOFF_REASON
         if it >= max_it:
             return R.DIVERGED_MAX_IT
         return R.ITERATING
@@ -400,7 +408,7 @@ class Minimiser:
                     reason = R.CONVERGED_FNORM_ABS if norm <= atol else R.CONVERGED_FNORM_RELATIVE
                     return reason, norm
                 decrement = self.newton_step(x, r, step)
-                self._decrements.append(decrement)
+                self._decrements.append(np.nan if self.saddle else decrement)
                 if self.stopping == "decrement" and decrement <= self.decrement_tol:
                     return DECREMENT_REASON, norm
                 if getattr(self.problem, "contact", None) is not None:
