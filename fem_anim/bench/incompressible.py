@@ -56,10 +56,11 @@ class StaticMixed:
         E, nu: Young's modulus and Poisson's ratio in (0, 0.5].
         loads: ``loads(u, p, x)`` -> the UFL load potential (subtracted from int W).
         dirichlet: ``(marker, values)``: u = values(x) (numpy, shape (d, n)) where marker(x).
+        held: Components held at zero at every node (3D plane strain: ``(2,)``).
     """
 
     def __init__(self, mesh, model: str, E: float, nu: float, loads, dirichlet,
-                 quadrature_degree: int = 4):
+                 quadrature_degree: int = 4, held: tuple[int, ...] = ()):
         self.mesh = mesh
         d = mesh.topology.dim
         self.W = compat.mixed_space(mesh, 2, 1)
@@ -85,6 +86,10 @@ class StaticMixed:
         blocks = fem.locate_dofs_geometrical(self.V, marker)
         unrolled = (blocks[:, None] * d + np.arange(d)).ravel()
         self.w.x.array[self.u_dofs[unrolled]] = boundary.x.array[unrolled]
+        every = np.arange(self.V.dofmap.index_map.size_local
+                          + self.V.dofmap.index_map.num_ghosts)
+        for component in held:
+            unrolled = np.union1d(unrolled, every * d + component)
         zero = fem.Function(self.V)
         self.bcs = [fem.dirichletbc(zero, [self.u_dofs[unrolled], unrolled.astype(np.int32)],
                                     self.W.sub(0))]
@@ -137,36 +142,47 @@ class StaticMixed:
         return u, p
 
 
-def cook_mesh(n: int, comm=MPI.COMM_WORLD):
-    """Cook's trapezoid, n x n squares of the 48 x 44 block cut into triangles, mapped."""
-    mesh = dmesh.create_rectangle(comm, [np.zeros(2), np.array([48.0, 44.0])], [n, n],
-                                  dmesh.CellType.triangle)
+def cook_mesh(n: int, comm=MPI.COMM_WORLD, dim: int = 2):
+    """Cook's trapezoid, n x n squares of the 48 x 44 block cut into triangles, mapped; in 3D
+    a slab of one layer of thickness 48 / n (tetrahedra)."""
+    if dim == 2:
+        mesh = dmesh.create_rectangle(comm, [np.zeros(2), np.array([48.0, 44.0])], [n, n],
+                                      dmesh.CellType.triangle)
+    else:
+        mesh = dmesh.create_box(comm, [np.zeros(3), np.array([48.0, 44.0, 48.0 / n])],
+                                [n, n, 1], dmesh.CellType.tetrahedron)
     x = mesh.geometry.x
     x[:, 1] += x[:, 0] / 48.0 * (44.0 - x[:, 1] / 44.0 * 28.0)
     return mesh
 
 
 def cook_membrane(n: int, model: str = "neohookean", load: float = 1e-4,
-                  comm=MPI.COMM_WORLD) -> float:
-    """Vertical displacement of (48, 52) over ``load`` (compare :data:`COOK_REFERENCE`)."""
+                  comm=MPI.COMM_WORLD, dim: int = 2) -> float:
+    """Vertical displacement of (48, 52) over ``load`` (compare :data:`COOK_REFERENCE`).
+
+    ``dim = 3``: the same plane-strain problem on a one-layer slab of tetrahedra with
+    u_z = 0 at every node (FinEALE's 3D version of it).
+    """
     lmbda, mu = 7500.0, 0.375
     nu = lmbda / (2.0 * (lmbda + mu))
     E = mu * (3.0 * lmbda + 2.0 * mu) / (lmbda + mu)
-    mesh = cook_mesh(n, comm)
-    facets = dmesh.locate_entities_boundary(mesh, 1, lambda x: np.isclose(x[0], 48.0))
-    tags = dmesh.meshtags(mesh, 1, np.sort(facets).astype(np.int32),
+    mesh = cook_mesh(n, comm, dim)
+    facets = dmesh.locate_entities_boundary(mesh, dim - 1, lambda x: np.isclose(x[0], 48.0))
+    tags = dmesh.meshtags(mesh, dim - 1, np.sort(facets).astype(np.int32),
                           np.ones(facets.size, dtype=np.int32))
     ds = ufl.Measure("ds", domain=mesh, subdomain_data=tags)
-    traction = ufl.as_vector([0.0, load / 16.0])
+    traction = ufl.as_vector([0.0, load / 16.0, 0.0][:dim])
 
     def loads(u, p, x):
         return ufl.dot(traction, u) * ds(1)
 
     problem = StaticMixed(mesh, model, E, nu, loads,
-                          (lambda x: np.isclose(x[0], 0.0), lambda x: np.zeros((2, x.shape[1]))))
+                          (lambda x: np.isclose(x[0], 0.0), lambda x: np.zeros((dim, x.shape[1]))),
+                          held=(2,) if dim == 3 else ())
     problem.solve()
     u, _ = problem.fields()
-    return float(PointSampler(mesh, np.array([[48.0, 52.0]])).sample(u)[0, 1] / load)
+    point = np.array([[48.0, 52.0, 24.0 / n][:dim]])
+    return float(PointSampler(mesh, point).sample(u)[0, 1] / load)
 
 
 def _exact(x, amplitude: float, mu: float):
@@ -227,6 +243,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"Cook's membrane, plane strain, nu = 0.499975, P2/P1 (reference "
               f"{COOK_REFERENCE:.4f})\n\n| n x n | u_y(48, 52) | error |\n|---|---|---|")
         for n, value in rows:
+            print(f"| {n} | {value:.4f} | {100 * (value / COOK_REFERENCE - 1):+.3f} % |")
+    rows3 = [(n, cook_membrane(n, dim=3)) for n in sizes[:3]]
+    if rank0:
+        print("\nThe same, 3D: one layer of tetrahedra, u_z = 0 (plane strain)\n\n"
+              "| n x n x 1 | u_y(48, 52) | error |\n|---|---|---|")
+        for n, value in rows3:
             print(f"| {n} | {value:.4f} | {100 * (value / COOK_REFERENCE - 1):+.3f} % |")
     errors = [manufactured_errors(n) for n in sizes]
     if rank0:
