@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 import ufl
+from fem_anim.forms.kinematics import deformation_gradient
 from mpi4py import MPI
 
 from fem_anim import compat
-from fem_anim.forms.kinematics import deformation_gradient
 from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
 

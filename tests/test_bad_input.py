@@ -307,8 +307,8 @@ CORPUS = [
                              "neohookean, stable_neohookean, mooney_rivlin"),
           f'{MIXED}[material]\nmodel = "{model}"\n[solver]\npreset = "ldlt"\n')
       for model in ("linear", "stvk", "corotated")),
-    Bad("mixed-lumped", ('material.mass = "lumped" is refused with element.formulation = '
-                         '"mixed"', "the pressure has no inertia"),
+    Bad("mixed-lumped", (('material.mass = "lumped" is refused with element.formulation = '
+                          '"mixed"'), "the pressure has no inertia"),
         f'{MIXED}[material]\nmass = "lumped"\n[solver]\npreset = "ldlt"\n'),
     Bad("mixed-p1", ('element.degree = 1 is refused with element.formulation = "mixed"',
                      "stabilisation"),
@@ -320,8 +320,8 @@ CORPUS = [
         f'{MIXED}[solver]\npreset = "ldlt"\nstopping = "decrement"\n'),
     Bad("schur-displacement", ("solver.preset = 'schur' splits displacement and pressure",),
         '[solver]\npreset = "schur"\n'),
-    Bad("mooney-rivlin-displacement", ('material.model = "mooney_rivlin" exists only with '
-                                       'element.formulation = "mixed"',),
+    Bad("mooney-rivlin-displacement", (('material.model = "mooney_rivlin" exists only with '
+                                        'element.formulation = "mixed"'),),
         '[material]\nmodel = "mooney_rivlin"\n'),
     # -- --set on a scene file --------------------------------------------------------------
     Bad("set-key-into-list", ("--set pin.first.min: pin is a list; give an entry number",),

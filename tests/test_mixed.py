@@ -21,13 +21,13 @@ import pytest
 import scipy.sparse as sp
 import ufl
 from conftest import mpirun_command
+from fem_anim.forms.kinematics import deformation_gradient
+from fem_anim.forms.mixed import MIXED_MATERIALS
 from mpi4py import MPI
 from scenes import beam, make_scene, wall_pin
 
 from fem_anim import compat
 from fem_anim.bench.incompressible import COOK_REFERENCE, cook_membrane, manufactured_errors
-from fem_anim.forms.kinematics import deformation_gradient
-from fem_anim.forms.mixed import MIXED_MATERIALS
 from fem_anim.simulation import Simulation
 
 
@@ -64,11 +64,11 @@ def test_manufactured_solution_orders(model):
 
 
 def _mixed_scene(tmp_path, d=2, **sections):
-    keys = dict(element={"degree": 2, "formulation": "mixed"},
-                material={"poisson_ratio": 0.5, "model": "stable_neohookean",
-                          "youngs_modulus": 1e4},
-                solver={"preset": "ldlt"}, time={"steps": 6, "dt": 1.0 / 30.0},
-                gravity={"acceleration": [0.0, -9.81, 0.0][:d]}, pin=[wall_pin(d)])
+    keys = {"element": {"degree": 2, "formulation": "mixed"},
+            "material": {"poisson_ratio": 0.5, "model": "stable_neohookean",
+                         "youngs_modulus": 1e4},
+            "solver": {"preset": "ldlt"}, "time": {"steps": 6, "dt": 1.0 / 30.0},
+            "gravity": {"acceleration": [0.0, -9.81, 0.0][:d]}, "pin": [wall_pin(d)]}
     for k, v in sections.items():
         keys[k] = keys.get(k, {}) | v
     return make_scene(tmp_path, beam("mixed", d, **keys))
@@ -201,9 +201,9 @@ def test_mixed_energy_matches_the_numpy_reference(d, model):
     relative to the largest entry, as ASSEMBLY_RTOL in test_reference_comparison.py."""
     from dolfinx import fem
     from dolfinx.fem import petsc as fem_petsc
+    from fem_anim.forms.mixed import lagrangian
 
     from fem_anim import reference
-    from fem_anim.forms.mixed import lagrangian
     from fem_anim.mesh import mesh_from_arrays
     from fem_anim.output import VertexGather
     from fem_anim.reference.mixed import mixed_energy, mixed_gradient, mixed_hessian

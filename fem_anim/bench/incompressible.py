@@ -37,11 +37,10 @@ from petsc4py import PETSc
 
 from .. import compat
 from ..forms.kinematics import deformation_gradient
-from ..forms.lame import lame_parameters
 from ..forms.mixed import MIXED_MATERIALS, compliance, lagrangian
 from .measure import PointSampler
 
-__all__ = ["COOK_REFERENCE", "StaticMixed", "cook_membrane", "manufactured_errors", "main"]
+__all__ = ["COOK_REFERENCE", "StaticMixed", "cook_membrane", "main", "manufactured_errors"]
 
 #: Converged mid-edge vertical displacement of the plane-strain Cook membrane (module docs).
 COOK_REFERENCE = 16.432584376299037

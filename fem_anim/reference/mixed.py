@@ -120,7 +120,7 @@ def mixed_energy(points, cells, model, mu, inv_kappa, x, p, ratio=0.0) -> float:
 def _stress_parts(model, F, mu, ratio, pbar):
     """``vec(P + pbar g' cof F)`` ``(n, d*d)``, its derivative ``(n, d*d, d*d)`` and
     ``vec(g' cof F)`` (the coupling)."""
-    n, d, _ = F.shape
+    d = F.shape[-1]
     (I, II, J), first, second = _invariant_derivatives(F)
     s = _partials(model, I, II, J, mu, ratio, d)
     g, dg, d2g = _constraint(model, J)
