@@ -12,6 +12,8 @@ between them is wrapped here, in the package and in the tests alike
 ``fem.FunctionSpace(mesh, ("DG", 0))``      ``fem.functionspace(mesh, ("DG", 0))``
 ``ufl.TensorElement("Quadrature", ...)``    ``basix.ufl.quadrature_element(cell, shape, ...)``
 ``ufl.Mesh(ufl.VectorElement(...))``        ``basix.ufl.element("Lagrange", cell, 1, shape)``
+``ufl.MixedElement([...])``                 ``basix.ufl.mixed_element([...])``
+``PC.SchurPreType``                         ``PC.FieldSplitSchurPreType`` (petsc4py)
 ``u.vector``                                ``u.x.petsc_vec``
 ``geometry.dofmap`` / ``dofmap.list``       2D arrays (0.5: adjacency lists)
 ``geometry.BoundingBoxTree(mesh, d)``       ``geometry.bb_tree(mesh, d)``
@@ -50,6 +52,9 @@ __all__ = [
     "SUPPORTED",
     "vector_space",
     "cell_space",
+    "mixed_space",
+    "collapse_subspace",
+    "set_schur_user_matrix",
     "quadrature_space",
     "petsc_vec",
     "geometry_dofmap",
@@ -83,6 +88,38 @@ def vector_space(mesh, degree: int) -> fem.FunctionSpace:
     if LEGACY:
         return fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
     return fem.functionspace(mesh, ("Lagrange", degree, (mesh.geometry.dim,)))
+
+
+def mixed_space(mesh, degree_u: int, degree_p: int) -> fem.FunctionSpace:
+    """Mixed space of a vector Lagrange displacement (degree_u) and a scalar Lagrange
+    pressure (degree_p): Taylor-Hood for (2, 1)."""
+    if LEGACY:
+        cell = mesh.ufl_cell()
+        element = ufl.MixedElement([ufl.VectorElement("Lagrange", cell, degree_u),
+                                    ufl.FiniteElement("Lagrange", cell, degree_p)])
+        return fem.FunctionSpace(mesh, element)
+    cell = mesh.topology.cell_name()
+    element = basix.ufl.mixed_element([
+        basix.ufl.element("Lagrange", cell, degree_u, shape=(mesh.geometry.dim,)),
+        basix.ufl.element("Lagrange", cell, degree_p)])
+    return fem.functionspace(mesh, element)
+
+
+def collapse_subspace(space: fem.FunctionSpace, i: int) -> tuple[fem.FunctionSpace, np.ndarray]:
+    """Sub-space ``i`` of a mixed space as a space of its own, and the map from each of its
+    local dofs (unrolled: block size times nodes, owned and ghost) to the local dof of the
+    mixed space."""
+    sub, dofs = space.sub(i).collapse()
+    return sub, np.asarray(dofs, dtype=np.int32)
+
+
+def set_schur_user_matrix(pc, S) -> None:
+    """``PCFieldSplitSetSchurPre(pc, USER, S)``: petsc4py 3.18 names the enum
+    ``PC.SchurPreType``, later releases ``PC.FieldSplitSchurPreType``."""
+    from petsc4py import PETSc
+
+    kinds = getattr(PETSc.PC, "FieldSplitSchurPreType", None) or PETSc.PC.SchurPreType
+    pc.setFieldSplitSchurPreType(kinds.USER, S)
 
 
 def cell_space(mesh) -> fem.FunctionSpace:

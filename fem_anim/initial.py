@@ -60,6 +60,6 @@ def initial_velocity(scene, problem) -> np.ndarray | None:
             np.zeros(problem.d)
     X = problem.V.tabulate_dof_coordinates()[:, : problem.d]
     v = rigid_velocity(X, cfg["velocity"], cfg["angular_velocity"], center)
-    for bc in problem.bcs:
+    for bc in problem.displacement_bcs:
         v.reshape(-1)[bc.dof_indices()[0]] = 0.0
     return v.reshape(-1)

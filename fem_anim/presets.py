@@ -132,6 +132,7 @@ from collections.abc import Mapping
 
 __all__ = [
     "FORCING",
+    "MIXED_ONLY_PRESETS",
     "NEWTON_DEFAULTS",
     "PRESETS",
     "SUMMARY",
@@ -208,6 +209,22 @@ PRESETS: dict[str, dict[str, str]] = {
                        "ksp_max_it": "100"},
 }
 
+#: Presets for the saddle point of element.formulation = "mixed" only (fem_anim.mixed): PETSc
+#: fieldsplit with the fields u and p~ (index sets from the mixed space, set by
+#: EnergyProblem.configure_preconditioner), the full Schur factorisation
+#: [[A, 0], [B, S]] [[I, A^-1 B^T], [0, I]], A^-1 by one BoomerAMG V-cycle, S^-1 by one Jacobi
+#: application of the user matrix -w mu (1 + mu/kappa) M_p (the pressure mass) standing in for S;
+#: FGMRES outside, since the preconditioner is not a fixed linear map.
+MIXED_ONLY_PRESETS: dict[str, dict[str, str]] = {
+    "schur": {"ksp_type": "fgmres", "ksp_rtol": ITERATIVE_RTOL, "ksp_max_it": "500",
+              "ksp_gmres_restart": "100", "pc_type": "fieldsplit",
+              "pc_fieldsplit_type": "schur", "pc_fieldsplit_schur_fact_type": "full",
+              "pc_fieldsplit_schur_precondition": "user",
+              "fieldsplit_u_ksp_type": "preonly", "fieldsplit_u_pc_type": "hypre",
+              "fieldsplit_u_pc_hypre_type": "boomeramg",
+              "fieldsplit_p_ksp_type": "preonly", "fieldsplit_p_pc_type": "jacobi"},
+}
+
 SUMMARY: dict[str, str] = {
     "cholesky": "sparse Cholesky (MUMPS LDL^T without pivoting, for an SPD Hessian), "
                 "seed 3.3.1; the default",
@@ -226,6 +243,8 @@ SUMMARY: dict[str, str] = {
                                "solve, seed 3.3.2",
     "richardson-sor": "classical SOR, P = D / omega + L, omega = 1.6: 100 forward sweeps "
                       "per solve, seed 3.3.2",
+    "schur": "element.formulation = \"mixed\" only: FGMRES, fieldsplit Schur complement, "
+             "BoomerAMG on u, pressure mass for S",
 }
 
 #: Serial-only factorisations and their parallel replacements (block Jacobi: one block
@@ -307,9 +326,10 @@ def parallel_note(name: str, comm_size: int = 2) -> str:
 
 
 def _lookup(name: str) -> dict[str, str]:
-    if name not in PRESETS:
-        raise KeyError(f"unknown solver preset {name!r} (known: {', '.join(PRESETS)})")
-    return PRESETS[name]
+    known = PRESETS | MIXED_ONLY_PRESETS
+    if name not in known:
+        raise KeyError(f"unknown solver preset {name!r} (known: {', '.join(known)})")
+    return known[name]
 
 
 def preset_options(name: str, comm_size: int = 1) -> dict[str, str]:
@@ -365,7 +385,7 @@ def describe_presets() -> str:
     lines = [("Linear solver presets (--solver NAME or solver.preset); options without the "
               "fem_anim_ prefix."),
              "Precedence: defaults < preset < scene [solver.petsc] < command line.", ""]
-    for name, options in PRESETS.items():
+    for name, options in (PRESETS | MIXED_ONLY_PRESETS).items():
         lines.append(f"{name}: {SUMMARY[name]}")
         lines += [f"    -{k} {v}".rstrip() for k, v in options.items()]
         parallel = preset_options(name, comm_size=2)

@@ -17,6 +17,17 @@ scalar forms over the same measures.
 
 The unknown is the displacement u = x - X (x deformed, X rest positions); pinned dofs
 are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins).
+
+With ``element.formulation = "mixed"`` (:mod:`fem_anim.mixed`) the unknown is instead
+w = (u, p / mu) in the Taylor-Hood space P2 x P1, and the elastic term is the perturbed
+Lagrangian int psi_dev(F) + p g(J) - p^2 / (2 kappa) of :mod:`fem_anim.forms.mixed`: the
+objective is stationary, not minimal, at the step's solution (the solver then uses no
+objective, :mod:`fem_anim.solver`). :attr:`u`, the predictor, velocity and the reported
+energies stay on the displacement space V; :meth:`set_state` copies w's fields into
+:attr:`u` and :attr:`p`. The elastic energy reported is int W(F(u), p) at the solution, the
+stored energy of the discrete constrained body. The default quadrature degree is raised
+to 1 + d (k - 1) so that int q (J - 1) dX is integrated exactly: with g = J - 1 the total
+volume is kept exactly, up to the solver tolerance.
 """
 
 from __future__ import annotations
@@ -39,12 +50,14 @@ from fem_anim.forms.integrator import SCHEMES, step_objective
 from fem_anim.forms.kinematics import deformation_gradient
 from fem_anim.forms.lame import lame_parameters
 from fem_anim.forms.material import EXTRA_DATA, get_material
+from fem_anim.forms.mixed import MIXED_MATERIALS, compliance, lagrangian
 
 from . import compat
 from .contact import ObstacleContact
 from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh, cell_volumes
+from .mixed import MixedFields, SchurPreconditioner
 from .pin import PinMotion
 from .quadrature import QuadratureData
 from .region import assign_materials
@@ -103,11 +116,21 @@ class EnergyProblem:
         self.quadrature_degree = scene["element"]["quadrature_degree"]
         if self.quadrature_degree is None:
             self.quadrature_degree = default_quadrature_degree(degree)
+            if scene["element"].get("formulation") == "mixed":
+                # int q (J - 1) exact for P_{k-1} q: the total volume is kept exactly
+                self.quadrature_degree = max(self.quadrature_degree, 1 + d * (degree - 1))
         self.scheme = SCHEMES[scene["time"]["integrator"]]
-        self.material = get_material(scene["material"]["model"])
         self.material_map = None
+        #: element.formulation = "mixed": the unknown is w = (u, p~) (fem_anim.mixed), a saddle
+        #: point; u and v stay displacement Functions, kept equal to w's first field
+        self.mixed = scene["element"].get("formulation", "displacement") == "mixed"
+        self.saddle_point = self.mixed
+        self.fields = MixedFields(mesh, degree) if self.mixed else None
+        self.schur = None
+        # the displacement model (None for mixed: its energy is forms.mixed's Lagrangian)
+        self.material = None if self.mixed else get_material(scene["material"]["model"])
 
-        V = self.V = compat.vector_space(mesh, degree)
+        V = self.V = self.fields.V if self.mixed else compat.vector_space(mesh, degree)
         self.u = fem.Function(V, name="displacement")
         self.u_pred = fem.Function(V, name="predictor")
         self.u_prev = fem.Function(V, name="previous_displacement")
@@ -116,17 +139,26 @@ class EnergyProblem:
         self.u_anchor = fem.Function(V, name="damping_anchor")
 
         mat = scene["material"]
-        mu, lmbda = lame_parameters(mat["youngs_modulus"], mat["poisson_ratio"])
+        if self.mixed and mat["poisson_ratio"] == 0.5:  # lmbda = inf is never formed
+            mu, lmbda = mat["youngs_modulus"] / 3.0, np.inf
+        else:
+            mu, lmbda = lame_parameters(mat["youngs_modulus"], mat["poisson_ratio"])
         self.mu = fem.Constant(mesh, PETSc.ScalarType(mu))
         self.lmbda = fem.Constant(mesh, PETSc.ScalarType(lmbda))
         self.rho = fem.Constant(mesh, PETSc.ScalarType(mat["density"]))
         self.weight = fem.Constant(mesh, PETSc.ScalarType(0.0))
         self.damping_coefficient = fem.Constant(mesh, PETSc.ScalarType(0.0))
+        if self.mixed:
+            self.mixed_material = MIXED_MATERIALS[mat["model"]]
+            self.inv_kappa = fem.Constant(mesh, PETSc.ScalarType(compliance(
+                self.mixed_material, mat["youngs_modulus"], mat["poisson_ratio"], d)))
+            self.mooney_ratio = fem.Constant(mesh, PETSc.ScalarType(mat["mooney_ratio"]))
+            self.p = fem.Function(self.fields.Q, name="pressure")  # p / mu, dimensionless
 
         dx = ufl.Measure("dx", domain=mesh)
         self.dx_elastic = dx(metadata={"quadrature_degree": self.quadrature_degree})
         #: (material, measure) of each elastic integral: one per model in use
-        self.elastic_terms = [(self.material, self.dx_elastic)]
+        self.elastic_terms = [] if self.mixed else [(self.material, self.dx_elastic)]
         self.W0 = compat.cell_space(mesh)  # per-cell data: region parameters, energy density
         if scene.get("region"):
             self._regions()
@@ -141,6 +173,11 @@ class EnergyProblem:
         self._extra: dict = {}  # displacement Function -> the material's quadrature data
         self._quadrature_inputs: list[np.ndarray] | None = None  # their arrays at the refresh
         elastic_u = self._elastic_energy(self.u)
+        # the objective's displacement: u itself, or the first field of the mixed unknown
+        u_obj = self.u
+        if self.mixed:
+            elastic_u = self._mixed_energy(self.u, self.p)
+            u_obj = self.fields.u
         gravity_u = None
         self.g = None
         if "gravity" in scene.data:
@@ -164,23 +201,31 @@ class EnergyProblem:
             potential = ufl.derivative(at_prev, self.u_prev, self.u)
             if self.contact is not None:  # the barrier stays implicit: it guards d > 0
                 potential += self.contact.energy
+        if self.mixed:  # the same potential, of the mixed unknown (no contact: refused)
+            potential = self._mixed_energy(u_obj, self.fields.p)
+            if gravity_u is not None:
+                potential += gravity_forms.gravity_potential(u_obj, self.rho, self.g,
+                                                             self.dx_load)
         contact_terms = None
         if self.contact is not None:
             contact_terms = self.contact.energy if self.contact.friction is None else \
                 self.contact.energy + self.contact.friction
             if self.contact.friction is not None:
                 potential += self.contact.friction
-        convex = inertia_forms.inertia(self.u, self.u_pred, self.rho, self.dx_mass)
-        du, dv = ufl.TrialFunction(V), ufl.TestFunction(V)
+        convex = inertia_forms.inertia(u_obj, self.u_pred, self.rho, self.dx_mass)
+        unknown = self.fields.w if self.mixed else self.u
+        du, dv = ufl.TrialFunction(unknown.function_space), ufl.TestFunction(
+            unknown.function_space)
+        du_V, dv_V = (ufl.TrialFunction(V), ufl.TestFunction(V)) if self.mixed else (du, dv)
         ufl_forms = {}
         if "damping" in scene.data:
             convex += self._dissipation(self.u, self.u_anchor, self.damping_coefficient)
             zero = ufl.as_vector([0.0] * d)
             ufl_forms["damping_force"] = ufl.derivative(
-                self._dissipation(self.v, zero, 1.0), self.v, dv)
+                self._dissipation(self.v, zero, 1.0), self.v, dv_V)
         objective = step_objective(convex, potential, self.weight)
-        residual = ufl.derivative(objective, self.u, dv)
-        jacobian = ufl.derivative(residual, self.u, du)
+        residual = ufl.derivative(objective, unknown, dv)
+        jacobian = ufl.derivative(residual, unknown, du)
         solver = scene["solver"]
         self.tangent_data = None
         if solver["hessian"] == "project" and not self.scheme.explicit:
@@ -195,7 +240,8 @@ class EnergyProblem:
             jacobian += self.weight * correction  # sphere barriers: PSD-projected Hessian
         self.filter_inversion = solver["inversion_filter"]
         if self.filter_inversion is None:
-            self.filter_inversion = any(m.requires_positive_J for m, _ in self.elastic_terms)
+            self.filter_inversion = self.mixed or any(m.requires_positive_J
+                                                      for m, _ in self.elastic_terms)
         self.det_data = None
         self.det_dofs = None  # quadrature dofs the filter watches (None: all)
         if self.filter_inversion:
@@ -209,8 +255,8 @@ class EnergyProblem:
             "jacobian": jacobian,
             "kinetic": inertia_forms.kinetic_energy(self.v, self.rho, self.dx_mass),
             "elastic": elastic_u,
-            "mass": self.rho * ufl.inner(du, dv) * self.dx_mass,
-            "potential_gradient": ufl.derivative(potential_u, self.u, dv),
+            "mass": self.rho * ufl.inner(du_V, dv_V) * self.dx_mass,
+            "potential_gradient": ufl.derivative(potential_u, self.u, dv_V),
         }
         if gravity_u is not None:
             ufl_forms["gravity"] = gravity_u
@@ -221,6 +267,10 @@ class EnergyProblem:
         q = ufl.TestFunction(self.W0)
         ufl_forms["cell_elastic"] = sum(self._psi(self.u, material=m) * q * dx
                                         for m, dx in self.elastic_terms)
+        if self.mixed:
+            ufl_forms["cell_elastic"] = self._mixed_energy(self.u, self.p, q)
+            p_trial, p_test = ufl.split(du)[-1], ufl.split(dv)[-1]
+            ufl_forms["pressure_mass"] = p_trial * p_test * self.dx_elastic
         self.ufl_objective = objective
         self.ufl_elastic = elastic_u
         self.assembly_s = 0.0  # wall time spent assembling (objective, residual, Jacobian)
@@ -239,8 +289,17 @@ class EnergyProblem:
         self.cell_elastic_form = compiled["cell_elastic"]
         self._cell_volumes = None
 
-        self.bcs = self._pins()
-        self.x_work = compat.petsc_vec(self.u).duplicate()
+        self.unknown = unknown
+        #: the pins on V (mass, initial acceleration) and on the unknown (the step): the same
+        #: conditions unless the unknown is the mixed w
+        self.displacement_bcs = self._pins()
+        self.bcs = [self.fields.dirichletbc(self.u_bc, dofs) for dofs in self._pin_dofs] \
+            if self.mixed else self.displacement_bcs
+        self.x_work = compat.petsc_vec(unknown).duplicate()
+        if self.mixed:
+            mu_value, inv_kappa = float(self.mu.value), float(self.inv_kappa.value)
+            self.schur = SchurPreconditioner(self.fields, compiled["pressure_mass"],
+                                             mu_value * (1.0 + mu_value * inv_kappa))
 
     # -- construction helpers -------------------------------------------------------------
     def _regions(self) -> None:
@@ -315,6 +374,12 @@ class EnergyProblem:
     def _elastic_energy(self, u):
         return sum(self._psi(u, material=m) * dx for m, dx in self.elastic_terms)
 
+    def _mixed_energy(self, u, p_scaled, q=1.0):
+        """int q W(F(u), mu p~) dX, W the perturbed Lagrangian (:mod:`fem_anim.forms.mixed`)."""
+        W = lagrangian(self.mixed_material, deformation_gradient(u), self.mu * p_scaled,
+                       self.mu, self.inv_kappa, self.mooney_ratio)
+        return W * q * self.dx_elastic
+
     def _projected_elastic_hessian(self, du, dv):
         """w int grad(v) : A+ : grad(du), A+ the PSD projection of d^2 psi/dF^2."""
         d = self.d
@@ -341,6 +406,7 @@ class EnergyProblem:
     def _pins(self) -> list:
         bcs = []
         self.moving_pins: list[PinMotion] = []
+        self._pin_dofs: list[np.ndarray] = []  # nodes of V held by each pin
         coordinates = self.V.tabulate_dof_coordinates()[:, : self.d]
         for i, pin in enumerate(self.scene["pin"]):
             lo = np.asarray(pin["min"], dtype=float)
@@ -357,6 +423,7 @@ class EnergyProblem:
                 raise SceneError(f"pin[{i}] ({pin['name']}): the box min {pin['min']}, max "
                                  f"{pin['max']} contains no mesh vertex")
             bcs.append(fem.dirichletbc(self.u_bc, dofs))
+            self._pin_dofs.append(dofs)
             if pin["velocity"] is not None or pin["angular_velocity"] != 0:
                 self.moving_pins.append(PinMotion.from_scene(pin, dofs, coordinates_i))
         return bcs
@@ -378,10 +445,24 @@ class EnergyProblem:
     # -- assembly -------------------------------------------------------------------------
     def set_state(self, x: PETSc.Vec) -> None:
         """Copy a solver iterate into ``u`` (with ghosts) and refresh quadrature data."""
-        u = compat.petsc_vec(self.u)
+        u = compat.petsc_vec(self.unknown)
         x.copy(u)
         u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        if self.mixed:
+            self.fields.scatter(self.u, self.p)
         self.update_quadrature_data()
+
+    def load_guess(self, u: np.ndarray, x: PETSc.Vec, apply_bcs: bool = True) -> None:
+        """An initial guess into ``x`` from displacement values ``u`` (local dofs of V),
+        with the pinned values if ``apply_bcs``; a mixed guess keeps the last pressure."""
+        if self.mixed:
+            self.fields.set_displacement(u)
+        else:
+            self.u.x.array[:] = u
+        vec = compat.petsc_vec(self.unknown)
+        if apply_bcs:
+            fem_petsc.set_bc(vec, self.bcs)
+        vec.copy(x)
 
     def update_quadrature_data(self) -> None:
         """Refresh the material's quadrature data, unless its inputs are unchanged.
@@ -460,6 +541,8 @@ class EnergyProblem:
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.jacobian_form, self.bcs)
         A.assemble()
+        if self.schur is not None:
+            self.schur.update(float(self.weight.value))
         EVENTS["jacobian"].end()
         self.assembly_s += time.perf_counter() - start
 
@@ -474,8 +557,14 @@ class EnergyProblem:
         """
         A = fem_petsc.create_matrix(self.jacobian_form, mat_type)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        A.setNearNullSpace(self.rigid_body_modes())
+        if not self.mixed:  # the modes of the displacement block only: not set for (u, p)
+            A.setNearNullSpace(self.rigid_body_modes())
         return A
+
+    def configure_preconditioner(self, pc: PETSc.PC) -> None:
+        """Give a ``fieldsplit`` PC the fields of a mixed problem (``schur`` preset)."""
+        if self.schur is not None and pc.getType() == "fieldsplit":
+            self.schur.configure(pc)
 
     def rigid_body_modes(self) -> PETSc.NullSpace:
         """Translations and infinitesimal rotations of the body, orthonormalised."""

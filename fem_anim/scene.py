@@ -37,7 +37,8 @@ __all__ = ["Scene", "load_scene", "parse_override", "validate_render", "DEFAULTS
            "default_scene_text"]
 
 MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
-                   "corotated_lagged")
+                   "corotated_lagged", "mooney_rivlin")
+FORMULATIONS = ("displacement", "mixed")
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
 NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
@@ -235,13 +236,17 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "degree": Key(int, 1, _one_of((1, 2))),
         "quadrature_degree": Key(int, None, lambda v: None if 0 <= v <= 12 else
                                  "must be in 0..12"),
+        "formulation": Key(str, "displacement", _one_of(FORMULATIONS)),
     },
     "material": {
         "model": Key(str, "neohookean", _one_of(MATERIAL_MODELS)),
         "youngs_modulus": Key(NUM, 1.0e5, _positive),
-        "poisson_ratio": Key(NUM, 0.3, _in_open(-1.0, 0.5)),
+        # 0.5 passes here; scene_consistency admits it with element.formulation = "mixed" only
+        "poisson_ratio": Key(NUM, 0.3, lambda v: None if v == 0.5 else
+                             _in_open(-1.0, 0.5)(v)),
         "density": Key(NUM, 1000.0, _positive),
         "mass": Key(str, "consistent", _one_of(("consistent", "lumped"))),
+        "mooney_ratio": Key(NUM, 0.3, lambda v: None if 0 <= v <= 1 else "must be in [0, 1]"),
     },
     "time": {
         "integrator": Key(str, "newmark", _one_of(INTEGRATORS)),

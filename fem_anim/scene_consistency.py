@@ -16,7 +16,8 @@ from typing import Any
 
 from .errors import SceneError, show_value
 
-__all__ = ["check_consistency", "check_render", "HESSIAN_METHODS", "MAX_CELLS",
+__all__ = ["check_consistency", "check_render", "HESSIAN_METHODS", "MAX_CELLS", "MIXED_MODELS",
+           "MIXED_PRESETS",
            "OBSTACLE_KEYS", "REGION_MATERIAL_KEYS"]
 
 MAX_CELLS = 2.0e7  # ~24 GB of memory for a P1 Newton step; larger is a typo, not a scene
@@ -26,6 +27,54 @@ OBSTACLE_KEYS = {"plane": ("normal",), "sphere": ("center", "radius")}
 HESSIAN_METHODS = ("newton", "trust_region")
 #: Keys of a ``[[region]]`` that override the body's ``[material]``.
 REGION_MATERIAL_KEYS = ("model", "youngs_modulus", "poisson_ratio", "density")
+#: Models with a volumetric split (fem_anim/forms/mixed.py), the ones element.formulation =
+#: "mixed" takes; mooney_rivlin exists only there.
+MIXED_MODELS = ("neohookean", "stable_neohookean", "mooney_rivlin")
+#: Presets that solve the symmetric indefinite (saddle-point) Hessian of a mixed step.
+MIXED_PRESETS = ("ldlt", "lu", "schur")
+
+
+def _check_formulation(data: dict[str, Any]) -> None:
+    """element.formulation against the material, mass, degree and solver (fem_anim.mixed)."""
+    mat, element, solver = data["material"], data["element"], data["solver"]
+    mixed = element["formulation"] == "mixed"
+    if not mixed:
+        if mat["poisson_ratio"] == 0.5:
+            raise SceneError("material.poisson_ratio must be in (-1.0, 0.5) with element."
+                             "formulation = \"displacement\", got 0.5: an exactly "
+                             "incompressible solid needs element.formulation = \"mixed\"")
+        models = [mat["model"]] + [r["model"] for r in data.get("region", [])]
+        if "mooney_rivlin" in models:
+            raise SceneError("material.model = \"mooney_rivlin\" exists only with element."
+                             "formulation = \"mixed\" (its volumetric part is the pressure's)")
+        return
+    where = "with element.formulation = \"mixed\""
+    if mat["model"] not in MIXED_MODELS:
+        raise SceneError(f"material.model = {mat['model']!r} has no volumetric split: element."
+                         f"formulation = \"mixed\" takes one of {', '.join(MIXED_MODELS)}")
+    if mat["mass"] == "lumped":
+        raise SceneError(f"material.mass = \"lumped\" is refused {where} (the pressure has no "
+                         "inertia and row-sum lumping of P2 is not positive); use "
+                         "\"consistent\"")
+    if element["degree"] != 2:
+        raise SceneError(f"element.degree = {element['degree']} is refused {where}: it is "
+                         "Taylor-Hood P2/P1 (equal-order P1/P1 is unstable without a "
+                         "stabilisation, which is not offered); use element.degree = 2")
+    if not mat["poisson_ratio"] > 0.0:
+        raise SceneError(f"material.poisson_ratio must be in (0, 0.5] {where}, got "
+                         f"{mat['poisson_ratio']}")
+    refused = {"region": bool(data.get("region")), "obstacle": bool(data["obstacle"]),
+               "damping": "damping" in data}
+    for key, present in refused.items():
+        if present:
+            raise SceneError(f"[{key}] is not supported {where}")
+    if data["time"]["integrator"] == "symplectic_euler":
+        raise SceneError(f"time.integrator = \"symplectic_euler\" is refused {where}: the "
+                         "constraint must be implicit")
+    for key, allowed in (("method", "newton"), ("hessian", "exact"), ("stopping", "norm")):
+        if solver[key] != allowed:
+            raise SceneError(f"solver.{key} = {solver[key]!r} is refused {where}: the step is "
+                             f"a saddle point (use {allowed!r})")
 
 
 def _estimated_cells(mesh: dict[str, Any]) -> float:
@@ -101,6 +150,7 @@ def check_consistency(data: dict[str, Any]) -> None:
         raise SceneError(f"time.min_dt must not exceed time.dt = {data['time']['dt']}, got "
                          f"{data['time']['min_dt']}")
     check_render(data["render"])
+    _check_formulation(data)
     if data["element"]["degree"] == 2 and data["material"]["mass"] == "lumped":
         raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
                          "(row-sum lumping of P2 gives zero or negative vertex masses); use "

@@ -21,7 +21,6 @@ from petsc4py import PETSc
 
 from dolfinx.fem import petsc as fem_petsc
 
-from . import compat
 from .checkpoint import load_checkpoint, save_checkpoint
 from .energy import moving_pins
 from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
@@ -32,11 +31,12 @@ from .mesh import SimplexMesh, build_mesh
 from .output import (CellGather, RunDirectory, StatsWriter, TrajectoryWriter, VertexGather,
                      write_final, write_scene)
 from .petsc_options import flatten_options, merge_options
-from .presets import (NEWTON_DEFAULTS, drop_replaced, forcing_options, parallel_note,
-                      preset_options)
+from .presets import (MIXED_ONLY_PRESETS, NEWTON_DEFAULTS, drop_replaced, forcing_options,
+                      parallel_note, preset_options)
 from .problem import EnergyProblem
 from .progress import Progress
 from .provenance import WallClock
+from .scene_consistency import MIXED_PRESETS
 from .solver import NONLINEAR_METHODS, Minimiser, SolveStats
 
 __all__ = ["Simulation", "RunResult", "AdaptiveStepper", "solver_options"]
@@ -59,11 +59,19 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
             or ``solver.forcing = "adaptive"`` where no Krylov solve is adapted.
     """
     name = preset or scene["solver"]["preset"]
+    key = "--solver" if preset else "solver.preset"
     try:
         layer = preset_options(name, comm_size=comm_size)
     except KeyError as err:
-        key = "--solver" if preset else "solver.preset"
         raise FemAnimError(f"{key}: {err.args[0]}") from None
+    mixed = scene["element"].get("formulation") == "mixed"
+    if mixed and name not in MIXED_PRESETS:
+        raise FemAnimError(f"{key} = {name!r} cannot solve the saddle-point Hessian of "
+                           f"element.formulation = \"mixed\" (symmetric indefinite): use one "
+                           f"of {', '.join(MIXED_PRESETS)}")
+    if not mixed and name in MIXED_ONLY_PRESETS:
+        raise FemAnimError(f"{key} = {name!r} splits displacement and pressure: it needs "
+                           "element.formulation = \"mixed\"")
     above = merge_options(flatten_options(scene["solver"]["petsc"]), cli_options or {})
     layer = drop_replaced(layer, above)
     method = NONLINEAR_METHODS[scene["solver"]["method"]]
@@ -155,8 +163,8 @@ class Simulation:
             f_damp.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
             f.axpy(-1.0, f_damp)
             f_damp.destroy()
-        fem_petsc.set_bc(f, p.bcs, None, 0.0)
-        M = fem_petsc.assemble_matrix(p.mass_form, p.bcs)
+        fem_petsc.set_bc(f, p.displacement_bcs, None, 0.0)
+        M = fem_petsc.assemble_matrix(p.mass_form, p.displacement_bcs)
         M.assemble()
         ksp = PETSc.KSP().create(self.comm)
         ksp.setOperators(M)
@@ -220,15 +228,11 @@ class Simulation:
         """
         p = self.problem
         x = p.x_work
-        u = compat.petsc_vec(p.u)
         for guess in (u_pred, u_last):
-            p.u.x.array[:] = guess
-            fem_petsc.set_bc(u, p.bcs)
-            u.copy(x)
+            p.load_guess(guess, x)
             if math.isfinite(p.objective(None, x)):
                 return
-        p.u.x.array[:] = u_last
-        u.copy(x)
+        p.load_guess(u_last, x, apply_bcs=False)
         r, step = x.duplicate(), x.duplicate()
         p.residual(None, x, r)
         self.minimiser.newton_step(x, r, step)

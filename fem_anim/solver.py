@@ -19,6 +19,15 @@ the solver's prefix (default ``fem_anim_``), merged with the precedence of
 * obstacles (``[[obstacle]]``): the pre-check scales the Newton direction so that no
   line-search trial brings a contact point onto an obstacle
   (:meth:`fem_anim.contact.ObstacleContact.step_bound`).
+
+A saddle point (``problem.saddle_point``: ``element.formulation = "mixed"``,
+:mod:`fem_anim.mixed`) is not a minimum of g, so g cannot judge a step: SNES gets no
+objective, and the line search (``bt``) backtracks on the merit function ||r||^2/2, whose
+Newton direction is always a descent direction (d/dalpha ||r(x - alpha y)||^2/2 = -||r||^2 at
+alpha = 0). Stopping is by the residual norms only (the round-off test on g becomes one on
+||r||, :data:`SADDLE_FLOOR`), and the reported Newton decrement is NaN: r^T H^-1 r of an
+indefinite H is no bound on anything (``solver.stopping = "decrement"`` is refused for
+it). The inversion filter works as for a minimisation (it looks at the step, not at g).
 """
 
 from __future__ import annotations
@@ -56,6 +65,10 @@ ROUNDOFF_ULPS = 4096.0
 #: Reason recorded when the Newton-decrement test stopped the iteration: PETSc's
 #: CONVERGED_ITS ("converged by a user test"; a plain iteration cap is DIVERGED_MAX_IT).
 DECREMENT_REASON = 5
+#: A saddle point's Newton is at its round-off floor when an iteration no longer halves
+#: ||r|| although ||r|| is already this far below its first value (quadratic convergence
+#: would go on): it stops with ROUNDOFF_REASON and :meth:`Minimiser._polish` finishes.
+SADDLE_FLOOR = 1e-6
 
 
 @dataclass
@@ -106,7 +119,9 @@ class Minimiser:
         snes = self.snes = PETSc.SNES().create(problem.comm)
         snes.setOptionsPrefix(prefix)
         self._g_cache: list[tuple[PETSc.Vec, float]] = []
-        snes.setObjective(self.objective)
+        self.saddle = getattr(problem, "saddle_point", False)
+        if not self.saddle:
+            snes.setObjective(self.objective)
         snes.setFunction(problem.residual, self.b)
         snes.setJacobian(self._jacobian, self.A)
         snes.setConvergenceTest(self._converged)
@@ -131,6 +146,11 @@ class Minimiser:
             PETSc.Sys.popErrorHandler()
         if snes.getType() in ("newtonls",):
             snes.setLineSearchPreCheck(self._precheck)
+        # a fieldsplit PC learns its fields from the problem, and reads its sub-solvers'
+        # options when it is set up (the first solve): they are in the database then
+        pc = snes.getKSP().getPC()
+        if pc.getType() == "fieldsplit" and hasattr(problem, "configure_preconditioner"):
+            problem.configure_preconditioner(pc)
 
     def require_read(self, names) -> None:
         """Make the first :meth:`solve` fail if one of the options ``names`` (the command
@@ -175,7 +195,7 @@ class Minimiser:
             PETSc.Sys.popErrorHandler()
         reason = self.snes.getConvergedReason()
         stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
-            self._at_objective_roundoff(x, g0)
+            not self.saddle and self._at_objective_roundoff(x, g0)
         norm = self.snes.getFunctionNorm()
         if reason == ROUNDOFF_REASON or stalled:
             reason, norm = self._polish(x)
@@ -232,7 +252,7 @@ class Minimiser:
         """
         _, _, fnorm = norms
         rtol, atol, _, max_it = snes.getTolerances()
-        g = self.objective(snes, snes.getSolution())
+        g = np.nan if self.saddle else self.objective(snes, snes.getSolution())
         if it == 0:
             self._history = []
         self._history.append((fnorm, g))
@@ -247,9 +267,13 @@ class Minimiser:
             return R.CONVERGED_FNORM_ABS
         elif fnorm <= rtol * self._history[0][0]:
             return R.CONVERGED_FNORM_RELATIVE
-        if it > 0:
+        if it > 0 and not self.saddle:
             f_prev, g_prev = self._history[-2]
             if fnorm > 0.5 * f_prev and abs(g_prev - g) <= _resolution(g, g_prev):
+                return ROUNDOFF_REASON
+        elif it > 0:  # a saddle point: judged by ||r|| alone (no g to see round-off in)
+            f_prev = self._history[-2][0]
+            if fnorm > 0.5 * f_prev and fnorm <= SADDLE_FLOOR * self._history[0][0]:
                 return ROUNDOFF_REASON
         if it >= max_it:
             return R.DIVERGED_MAX_IT
@@ -262,7 +286,7 @@ class Minimiser:
         residual r at x is in ``self.b``: lambda^2 = r . y (seed definition 4). With the
         inversion filter on, y is halved until x - y has det F > 0 everywhere.
         """
-        self._decrements.append(0.5 * abs(self.b.dot(y)))
+        self._decrements.append(np.nan if self.saddle else 0.5 * abs(self.b.dot(y)))
         scaled = self._contact_bound(x, y)
         if not self.problem.filter_inversion:
             return scaled
@@ -401,7 +425,7 @@ class Minimiser:
                     reason = R.CONVERGED_FNORM_ABS if norm <= atol else R.CONVERGED_FNORM_RELATIVE
                     return reason, norm
                 decrement = self.newton_step(x, r, step)
-                self._decrements.append(decrement)
+                self._decrements.append(np.nan if self.saddle else decrement)
                 if self.stopping == "decrement" and decrement <= self.decrement_tol:
                     return DECREMENT_REASON, norm
                 if getattr(self.problem, "contact", None) is not None:

@@ -5,8 +5,10 @@ space or PETSc here (STYLE rule 2). :mod:`fem_anim.problem` binds them to DOLFIN
 
 Modules: :mod:`.kinematics` (F, strains), :mod:`.lame`, one module per material
 (:mod:`.linear`, :mod:`.stvk`, :mod:`.corotated`, :mod:`.neohookean`,
-:mod:`.stable_neohookean`) with the registry :mod:`.material`; :mod:`.inertia` (mass
-and kinetic energy), :mod:`.gravity`, :mod:`.integrator` (step objectives).
+:mod:`.stable_neohookean`) with the registry :mod:`.material`; :mod:`.mixed` (the
+perturbed-Lagrangian (u, p) energy of nearly incompressible solids, with
+:mod:`.mooney_rivlin`); :mod:`.inertia` (mass and kinetic energy), :mod:`.gravity`,
+:mod:`.integrator` (step objectives).
 """
 
 __all__ = ["gravity", "inertia", "integrator", "kinematics", "lame", "material"]

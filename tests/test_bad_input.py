@@ -43,6 +43,7 @@ from fem_anim.scene import (
 )
 
 PREFIX = "fem-anim: error: "
+MIXED = '[element]\ndegree = 2\nformulation = "mixed"\n'
 CWD = "home/cwd"  # deep enough that "../.." from it still lies inside the test's tmp_path
 PAYLOAD = "__import__('os').system('touch PWNED')"
 
@@ -328,6 +329,30 @@ CORPUS = [
         '[[obstacle]]\ntype = "plane"\nnormal = [0, 0, 1]\nheight = 1\n'),
     Bad("obstacle-not-array", ("obstacle must be an array of tables",),
         '[obstacle]\ntype = "plane"\nnormal = [0, 0, 1]\n'),
+    # -- element.formulation = "mixed" (nearly / exactly incompressible) ---------------------
+    Bad("nu-half-displacement", ("material.poisson_ratio must be in (-1.0, 0.5)", "got 0.5",
+                                 'needs element.formulation = "mixed"'),
+        "[material]\npoisson_ratio = 0.5\n", fresh=True),
+    *(Bad(f"mixed-{model}", (f"material.model = '{model}' has no volumetric split",
+                             "neohookean, stable_neohookean, mooney_rivlin"),
+          f'{MIXED}[material]\nmodel = "{model}"\n[solver]\npreset = "ldlt"\n')
+      for model in ("linear", "stvk", "corotated")),
+    Bad("mixed-lumped", (('material.mass = "lumped" is refused with element.formulation = '
+                          '"mixed"'), "the pressure has no inertia"),
+        f'{MIXED}[material]\nmass = "lumped"\n[solver]\npreset = "ldlt"\n'),
+    Bad("mixed-p1", ('element.degree = 1 is refused with element.formulation = "mixed"',
+                     "stabilisation"),
+        '[element]\nformulation = "mixed"\n[solver]\npreset = "ldlt"\n'),
+    Bad("mixed-cholesky", ("solver.preset = 'cholesky' cannot solve the saddle-point Hessian",
+                           "ldlt, lu, schur"), MIXED),
+    Bad("mixed-decrement", ("solver.stopping = 'decrement' is refused with element.formulation",
+                            "saddle point"),
+        f'{MIXED}[solver]\npreset = "ldlt"\nstopping = "decrement"\n'),
+    Bad("schur-displacement", ("solver.preset = 'schur' splits displacement and pressure",),
+        '[solver]\npreset = "schur"\n'),
+    Bad("mooney-rivlin-displacement", (('material.model = "mooney_rivlin" exists only with '
+                                        'element.formulation = "mixed"'),),
+        '[material]\nmodel = "mooney_rivlin"\n'),
     # -- --set on a scene file --------------------------------------------------------------
     Bad("set-key-into-list", ("--set pin.first.min: pin is a list; give an entry number",),
         PIN, args=("--set", "pin.first.min=[0, 0, 0]"), fresh=True),

@@ -9,6 +9,7 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.assembly` - global elastic energy, gradient and Hessian (eq. (27));
 * :mod:`.mass` - consistent and lumped mass matrices (eqs. (17)-(20)), gravity potential;
 * :mod:`.problem` - the potential energy with mass and pins;
+* :mod:`.mixed` - the perturbed-Lagrangian (u, p) energy of the mixed formulation (P1/P1);
 * :mod:`.contact` - the IPC log barrier against a plane or sphere obstacle (vertex rule);
 * :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
 * :mod:`.integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
