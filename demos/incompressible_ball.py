@@ -24,7 +24,6 @@
 # %%
 import dataclasses
 import os
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -130,5 +129,4 @@ if comm.rank == 0:
     b.set_xlabel("t (s): pressed until 0.1 s, then released")
     fig.tight_layout()
     fig.savefig(OUT / "incompressible_ball.png", dpi=100)
-    if not REDUCED:
-        shutil.copyfile(OUT / "incompressible_ball.png", HERE / "incompressible_ball.png")
+    print(f"picture {OUT / 'incompressible_ball.png'}")
