@@ -19,6 +19,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from .solver import POLISH_FAILED_REASON
+
 __all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
            "DAMPED_THRESHOLD"]
 
@@ -48,7 +50,10 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         A dictionary with ``initial_energy``, ``final_energy``, ``exchanged_energy``,
         ``drift`` (signed, relative), ``max_excursion`` (relative), ``conservative``
         (whether the scene conserves energy) and ``damped`` (a conservative scene that
-        lost more than :data:`DAMPED_THRESHOLD` of the exchanged energy).
+        lost more than :data:`DAMPED_THRESHOLD` of the exchanged energy), and
+        ``unconverged_steps``: the steps kept at the round-off floor of the objective
+        without meeting their stopping test (``snes_reason`` =
+        :data:`fem_anim.solver.POLISH_FAILED_REASON`).
     """
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]
@@ -64,7 +69,9 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         drift = excursion = 0.0
     return {"initial_energy": e0, "final_energy": e_end, "exchanged_energy": exchanged,
             "drift": drift, "max_excursion": excursion, "conservative": conservative,
-            "damped": conservative and drift < -DAMPED_THRESHOLD}
+            "damped": conservative and drift < -DAMPED_THRESHOLD,
+            "unconverged_steps": [int(r["step"]) for r in rows
+                                  if r.get("snes_reason") == POLISH_FAILED_REASON]}
 
 
 def describe_energy(report: dict, integrator: str) -> str:
@@ -73,6 +80,10 @@ def describe_energy(report: dict, integrator: str) -> str:
     base = (f"energy drift {pct:+.3g} % of the exchanged energy "
             f"({report['exchanged_energy']:.4g} J), max excursion "
             f"{100.0 * report['max_excursion']:.3g} %")
+    unconverged = report.get("unconverged_steps") or []
+    if unconverged:
+        base += (f"; {len(unconverged)} step(s) stopped at the round-off floor without "
+                 f"meeting the stopping test (first: step {unconverged[0]})")
     if not report["conservative"]:
         return base + " (not conserved by design: damping or moving pins)"
     if report["damped"]:

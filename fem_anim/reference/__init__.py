@@ -9,7 +9,8 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.assembly` - global elastic energy, gradient and Hessian (eq. (27));
 * :mod:`.mass` - consistent and lumped mass matrices (eqs. (17)-(20)), gravity potential;
 * :mod:`.problem` - the potential energy with mass and pins;
-* :mod:`.contact` - the IPC log barrier against a plane or sphere obstacle (vertex rule);
+* :mod:`.contact` - the IPC log barrier against a plane or sphere obstacle and its lagged
+  friction (vertex rule);
 * :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
 * :mod:`.integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
 """
@@ -20,6 +21,8 @@ from fem_anim.reference.contact import (
     contact_energy,
     contact_gradient,
     contact_hessian,
+    friction_energy,
+    friction_gradient,
 )
 from fem_anim.reference.geometry import (
     cell_dofs,
@@ -75,6 +78,8 @@ __all__ = [
     "elastic_gradient",
     "elastic_hessian",
     "first_piola",
+    "friction_energy",
+    "friction_gradient",
     "first_piola_derivative",
     "gradient_operator",
     "gravity_energy",
