@@ -284,8 +284,83 @@ def test_inversion_filter_halves_a_constructed_step(tmp_path):
         values.destroy()
         iterates.append(reference_min_det(points, cells, X + u))
 
+    negative = []
+    library_min_det = p.min_det_F
+
+    def counted_min_det():
+        value = library_min_det()
+        negative.append(value <= 0)
+        return value
+
+    p.min_det_F = counted_min_det
     minimiser.snes.setMonitor(monitor)
+    assert reference_min_det(points, cells, X + state.v[order] * h) < 0  # the predictor
     state, stats = sim.step(state, h)
+    assert any(negative)  # the filter had something to halve
     assert reference_min_det(points, cells, X + state.u[order]) > 0
     assert stats.newton_its >= 3 and len(iterates) == stats.newton_its + 1
     assert min(iterates) > 0, iterates
+
+
+# -- stopping tests -----------------------------------------------------------------------------
+#: The documented defaults (README, "Scene files": solver.stopping).
+README_RTOL, README_ATOL = 1e-8, 1e-12
+
+
+def assert_rows_meet_the_test(rows, rtol=README_RTOL, atol=README_ATOL):
+    """Every stats row: converged by its test, residual <= max(atol, rtol r0)."""
+    from fem_anim.solver import CONVERGED_REASONS
+
+    for row in rows:
+        target = max(atol, rtol * row["initial_residual_norm"])
+        assert row["snes_reason"] in CONVERGED_REASONS, row
+        assert row["residual_norm"] <= target, (row["step"], row["residual_norm"], target)
+
+
+def test_every_accepted_step_meets_the_residual_test():
+    """A short hanging-beam run with the library defaults: every row meets the README test."""
+    sim = Simulation(load_scene(None, ["mesh.size=[1.0, 0.1, 0.1]", "mesh.element_size=0.1",
+                                       "time.steps=6"]), MPI.COMM_WORLD)
+    rtol, atol, _, _ = sim.minimiser.snes.getTolerances()
+    assert (rtol, atol) == (README_RTOL, README_ATOL)
+    result = sim.run(None)
+    assert len(result.rows) == 6
+    assert_rows_meet_the_test(result.rows)
+    # the relative test decided (r0 large enough): a swapped atol would have stopped sooner
+    assert all(r["initial_residual_norm"] * README_RTOL > README_ATOL for r in result.rows)
+
+
+@serial
+def test_polish_meets_the_test_or_reports_it(tmp_path):
+    """_polish: full Newton steps from near the solution meet a reachable test (reason 2/3),
+    an unreachable one is reported as POLISH_FAILED_REASON, in stats and the energy report."""
+    from fem_anim.energy import describe_energy, energy_report, initial_energies
+    from fem_anim.solver import POLISH_FAILED_REASON
+
+    scene = write_scene(tmp_path, 3, "neohookean", integrator="implicit_euler", pinned=True)
+    # an unreachable test: the line search stalls at the round-off floor of g, the polish
+    # cannot reach 1e-30 relative either
+    sim = Simulation(scene, MPI.COMM_WORLD, {"snes_rtol": "1e-30", "snes_atol": "0"})
+    state, row = sim.timed_step(sim.initial_state(), 1 / 60)
+    assert row["snes_reason"] == POLISH_FAILED_REASON
+    assert row["residual_norm"] > 1e-30 * row["initial_residual_norm"]
+    report = energy_report([row], initial_energies(sim), sim.scene)
+    assert report["unconverged_steps"] == [1]
+    assert "without meeting the stopping test" in describe_energy(report, "implicit_euler")
+    # a reachable test, from a point off the solution: the polish's full steps meet it
+    m = sim.minimiser
+    x = compat.petsc_vec(sim.problem.u).copy()
+    x.array[:] = state.u[: x.array.size]  # the step's minimiser (serial: no ghosts)
+    solution = x.copy()
+    x.array[:] += 1e-6 * np.random.default_rng(13).uniform(-1, 1, x.array.size)
+    for bc in sim.problem.bcs:
+        x.array[bc.dof_indices()[0]] = solution.array[bc.dof_indices()[0]]
+    m.snes.setTolerances(rtol=1e-10, atol=0.0)
+    m._history = [(1.0, 0.0)]  # r0 = 1: the target is 1e-10
+    reason, norm = m._polish(x)
+    assert reason == 3 and norm <= 1e-10
+    assert np.abs(x.array - solution.array).max() < 1e-9
+    # ... and unreachable from there (max 5 full steps cannot reach 1e-30)
+    m.snes.setTolerances(rtol=1e-30, atol=0.0)
+    reason, norm = m._polish(x)
+    assert reason == POLISH_FAILED_REASON and norm > 1e-30
