@@ -259,7 +259,10 @@ def test_friction_decelerates_a_sliding_block_at_mu_g(tmp_path):
         times.append(state.time)
         velocities.append(mean_velocity(sim, state, 0))
     slope = np.polyfit(times[2:15], velocities[2:15], 1)[0]
-    assert -slope == pytest.approx(mu * G, rel=0.1), (velocities, slope)
+    print("friction deceleration / (mu g) - 1:", -slope / (mu * G) - 1)
+    # measured 0.12 % (the lagged pressure of a settled block is m g to the barrier's
+    # equilibrium); a 7 % error in the friction pressure must show
+    assert -slope == pytest.approx(mu * G, rel=0.012), (velocities, slope)
 
 
 @pytest.mark.slow
