@@ -31,6 +31,7 @@ import scipy.sparse as sp
 import ufl
 from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
+from conftest import README_ATOL, README_RTOL, assert_rows_meet_the_test
 from mpi4py import MPI
 from test_contact import GAP, near_contact_positions, reference_scene
 from test_reference_comparison import Comparison, beam_mesh, reference_order, write_scene
@@ -233,8 +234,8 @@ def test_rayleigh_damping_decays_a_mode_at_the_closed_form_rate(tmp_path, term):
         state, _ = sim.step(state, h)
         z = T @ z
         errors.append(np.abs(state.u - z[0] * q0 * phi / np.abs(phi).max()).max() / q0)
-    decay = abs(z[0]) if abs(z[1]) < 1e-12 else np.hypot(z[0], z[1] / omega)
-    assert decay < 0.9  # the damping is visible: a factor 2 on it would be too
+    amplitude = np.hypot(z[0], z[1] / omega)  # exp(-0.15 omega t) = 0.24 after 1.5 periods
+    assert amplitude < 0.3  # the damping is visible: a factor 2 on it is too
     assert max(errors) <= 1e-9, max(errors)  # measured 2.5e-11 (snes_rtol 1e-12)
 
 
@@ -303,20 +304,6 @@ def test_inversion_filter_halves_a_constructed_step(tmp_path):
 
 
 # -- stopping tests -----------------------------------------------------------------------------
-#: The documented defaults (README, "Scene files": solver.stopping).
-README_RTOL, README_ATOL = 1e-8, 1e-12
-
-
-def assert_rows_meet_the_test(rows, rtol=README_RTOL, atol=README_ATOL):
-    """Every stats row: converged by its test, residual <= max(atol, rtol r0)."""
-    from fem_anim.solver import CONVERGED_REASONS
-
-    for row in rows:
-        target = max(atol, rtol * row["initial_residual_norm"])
-        assert row["snes_reason"] in CONVERGED_REASONS, row
-        assert row["residual_norm"] <= target, (row["step"], row["residual_norm"], target)
-
-
 def test_every_accepted_step_meets_the_residual_test():
     """A short hanging-beam run with the library defaults: every row meets the README test."""
     sim = Simulation(load_scene(None, ["mesh.size=[1.0, 0.1, 0.1]", "mesh.element_size=0.1",

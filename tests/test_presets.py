@@ -22,10 +22,9 @@ from pathlib import Path
 import meshio
 import numpy as np
 import pytest
-from conftest import clean_environment, fem_anim_command, mpirun_command
+from conftest import (assert_rows_meet_the_test, clean_environment, fem_anim_command,
+                      mpirun_command)
 from mpi4py import MPI
-
-from test_independent_checks import assert_rows_meet_the_test
 
 from fem_anim.cli import main
 from fem_anim.errors import FemAnimError, SceneError
