@@ -351,3 +351,14 @@ def test_polish_meets_the_test_or_reports_it(tmp_path):
     m.snes.setTolerances(rtol=1e-30, atol=0.0)
     reason, norm = m._polish(x)
     assert reason == POLISH_FAILED_REASON and norm > 1e-30
+    # the decrement test: reachable (lambda^2/2 of the next direction <= 1e-20 J) or not
+    m.stopping = "decrement"
+    x.array[:] += 1e-6 * np.random.default_rng(14).uniform(-1, 1, x.array.size)
+    for bc in sim.problem.bcs:
+        x.array[bc.dof_indices()[0]] = solution.array[bc.dof_indices()[0]]
+    m.decrement_tol = 1e-20
+    reason, _ = m._polish(x)
+    assert reason == 5 and m._decrements[-1] <= 1e-20
+    m.decrement_tol = 0.0
+    reason, _ = m._polish(x)
+    assert reason == POLISH_FAILED_REASON
