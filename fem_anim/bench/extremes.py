@@ -298,7 +298,8 @@ def run_case(case: Case, comm=None) -> Outcome:
         growth = (max(r["total_energy"] for r in rows) - e0) / scale if scale > 0 else 0.0
         info["growth"] = growth
         bounded &= growth <= ENERGY_GROWTH_BOUND
-        detail += f", energy drift {100 * report['drift']:+.2g} %"
+        detail += (f", energy drift {100 * report['drift']:+.2g} %, largest rise "
+                   f"{100 * growth:.2g} %")
     if case.check == "rigid":  # rotation invariance: a turn does not inflate the body
         change = comm.bcast(_volume_change(sim, state), root=0)
         checked = abs(change) < 0.05
