@@ -274,8 +274,9 @@ def test_block_on_tilted_plane_sticks_or_slides(tmp_path, mu, slides):
     v = mean_velocity(sim, state, 0)
     if slides:
         expected = G * (math.sin(angle) - mu * math.cos(angle)) * state.time
-        assert v == pytest.approx(expected, rel=0.15)
+        assert v == pytest.approx(expected, rel=0.05)  # measured 0.44 %
     else:
+        # measured 7.5e-3 m/s: the lagged friction's creep (|u_T| < eps_v h per step)
         assert abs(v) < 0.02 * G * math.sin(angle) * state.time
 
 
