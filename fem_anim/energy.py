@@ -19,8 +19,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .solver import POLISH_FAILED_REASON
-
 __all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
            "DAMPED_THRESHOLD"]
 
@@ -55,6 +53,8 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         without meeting their stopping test (``snes_reason`` =
         :data:`fem_anim.solver.POLISH_FAILED_REASON`).
     """
+    from .solver import POLISH_FAILED_REASON  # here: importing PETSc waits for init_petsc
+
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]
     exchanged = max([abs(e0)] + [r["kinetic"] for r in rows]
