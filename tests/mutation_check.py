@@ -16,9 +16,8 @@ and the kill rate, and exits 1 if any mutation is missed (2 for a malformed list
 
 It is not collected by pytest (its name does not start with ``test_``) and CI does not
 run it: a full run takes 4-8 minutes on 2 shared cores. ``tests/test_mutation_list.py``
-(fast, in CI)
-checks that every listed original text still occurs exactly once and that every selected
-test exists, so the list cannot rot silently when the code changes.
+(fast, in CI) checks that every listed original text still occurs exactly once and that
+every selected test exists, so the list cannot rot silently when the code changes.
 
 Usage::
 
