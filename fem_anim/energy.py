@@ -111,7 +111,12 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         friction only dissipate), ``flagged`` (either) and ``friction_newmark`` (lagged
         friction under the trapezoidal rule, which does not keep the energy at impacts:
         see the module docstring).
+        ``unconverged_steps`` lists the steps kept at the round-off floor of the objective
+        without meeting their stopping test (``snes_reason`` =
+        :data:`fem_anim.solver.POLISH_FAILED_REASON`).
     """
+    from .solver import POLISH_FAILED_REASON  # here: importing PETSc waits for init_petsc
+
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]
     exchanged = max([abs(e0)] + [r["kinetic"] for r in rows]
@@ -130,7 +135,9 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
     return {"initial_energy": e0, "final_energy": e_end, "exchanged_energy": exchanged,
             "drift": drift, "max_excursion": excursion, "conservative": conservative,
             "damped": damped, "gained": gained, "flagged": damped or gained,
-            "friction_newmark": friction and scene["time"]["integrator"] == "newmark"}
+            "friction_newmark": friction and scene["time"]["integrator"] == "newmark",
+            "unconverged_steps": [int(r["step"]) for r in rows
+                                  if r.get("snes_reason") == POLISH_FAILED_REASON]}
 
 
 def describe_energy(report: dict, scene) -> str:
@@ -144,6 +151,10 @@ def describe_energy(report: dict, scene) -> str:
     base = (f"energy drift {pct:+.3g} % of the exchanged energy "
             f"({report['exchanged_energy']:.4g} J), max excursion "
             f"{100.0 * report['max_excursion']:.3g} %")
+    unconverged = report.get("unconverged_steps") or []
+    if unconverged:
+        base += (f"; {len(unconverged)} step(s) stopped at the round-off floor without "
+                 f"meeting the stopping test (first: step {unconverged[0]})")
     if report["damped"]:
         # newmark gains energy at impacts (NEWMARK_CONTACT): not advised for contact
         advice = "a smaller time.dt" if integrator == "newmark" or scene["obstacle"] else \

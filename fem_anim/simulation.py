@@ -400,7 +400,9 @@ class Simulation:
         return new, {
             "step": new.step, "time": new.time, "dt": dt, "newton_its": solve.newton_its,
             "linear_its": solve.linear_its, "snes_reason": solve.reason,
-            "residual_norm": solve.residual_norm, "newton_decrement": solve.newton_decrement,
+            "residual_norm": solve.residual_norm,
+            "initial_residual_norm": solve.initial_residual_norm,
+            "newton_decrement": solve.newton_decrement,
             "shift": solve.shift, **energies, "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,
             "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,

@@ -43,7 +43,8 @@ from .hessian import ShiftStrategy
 from .petsc_options import DEFAULT_PREFIX, options_in_database, unused_options
 from .problem import EVENTS
 
-__all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "NONLINEAR_METHODS"]
+__all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "POLISH_FAILED_REASON",
+           "CONVERGED_REASONS", "NONLINEAR_METHODS"]
 
 #: Scene ``solver.method`` -> PETSc options (lowest layer above the library defaults).
 NONLINEAR_METHODS: dict[str, dict[str, str]] = {
@@ -58,8 +59,9 @@ NONLINEAR_METHODS: dict[str, dict[str, str]] = {
 }
 MAX_FILTER_HALVINGS = 40
 
-#: Reason recorded when Newton stopped at the round-off floor of the objective: PETSc's
-#: CONVERGED_SNORM_RELATIVE, which PETSc itself never reports here (``snes_stol`` is 0).
+#: Reason the convergence test gives when Newton stopped at the round-off floor of the
+#: objective: PETSc's CONVERGED_SNORM_RELATIVE, which PETSc itself never reports here
+#: (``snes_stol`` is 0). :meth:`Minimiser._polish` then decides the reason reported.
 ROUNDOFF_REASON = 4
 ROUNDOFF_ULPS = 4096.0
 #: Reason recorded when the Newton-decrement test stopped the iteration: PETSc's
@@ -69,6 +71,13 @@ DECREMENT_REASON = 5
 #: ||r|| although ||r|| is already this far below its first value (quadratic convergence
 #: would go on): it stops with ROUNDOFF_REASON and :meth:`Minimiser._polish` finishes.
 SADDLE_FLOOR = 1e-6
+#: Reason recorded when Newton stopped at the round-off floor of g and the polish's full
+#: Newton steps did not reach the requested test either (no PETSc reason is 6): the step is
+#: kept, as converged as double precision allows, but it is *not* converged to the test,
+#: and stats.csv, the energy report and summary.json say so.
+POLISH_FAILED_REASON = 6
+#: Reasons of a step that met its stopping test.
+CONVERGED_REASONS = (2, 3, DECREMENT_REASON)
 
 
 @dataclass
@@ -76,7 +85,10 @@ class SolveStats:
     """What one minimisation cost and how it ended.
 
     ``newton_decrement`` is lambda^2/2 at the last Newton direction (NaN for methods
-    without one); ``shift`` the last Hessian shift c; times are wall seconds.
+    without one); ``initial_residual_norm`` the residual norm r0 at the initial guess (the
+    relative test is ``residual_norm <= snes_rtol r0``); ``shift`` the last Hessian shift c;
+    times are wall seconds. ``reason`` is :data:`POLISH_FAILED_REASON` for a step kept at
+    the round-off floor without meeting its test.
     """
 
     newton_its: int
@@ -89,6 +101,7 @@ class SolveStats:
     assembly_s: float = 0.0
     factor_s: float = 0.0
     linear_solve_s: float = 0.0
+    initial_residual_norm: float = float("nan")
 
 
 class Minimiser:
@@ -206,7 +219,8 @@ class Minimiser:
             wall, newton_decrement=self._decrements[-1] if self._decrements else float("nan"),
             shift=self.shift.c if self.shift else 0.0,
             assembly_s=self.problem.assembly_s - assembly0, factor_s=factor1 - factor0,
-            linear_solve_s=solve1 - solve0)
+            linear_solve_s=solve1 - solve0,
+            initial_residual_norm=self._history[0][0] if self._history else float("nan"))
         if reason <= 0:
             ksp_reason = self.snes.getKSP().getConvergedReason()
             raise ConvergenceError(
@@ -407,8 +421,9 @@ class Minimiser:
         Below the objective's round-off the line search cannot tell a good step from a bad
         one, but the residual still can: take full steps while each at least halves the
         residual norm, then apply the chosen test (norms: ``snes_atol``, ``snes_rtol``;
-        or the decrement of the next Newton direction). If it is still not met, x is as
-        converged as double precision allows.
+        or the decrement of the next Newton direction). If it is still not met, x is kept
+        (it is as converged as double precision allows) but the step is reported as not
+        converged to its test: :data:`POLISH_FAILED_REASON`.
 
         Returns:
             The SNES reason to report and the final residual norm.
@@ -422,8 +437,7 @@ class Minimiser:
             norm = r.norm()
             for _ in range(max_steps):
                 if norm <= target and self.stopping == "norm":
-                    reason = R.CONVERGED_FNORM_ABS if norm <= atol else R.CONVERGED_FNORM_RELATIVE
-                    return reason, norm
+                    break
                 decrement = self.newton_step(x, r, step)
                 self._decrements.append(np.nan if self.saddle else decrement)
                 if self.stopping == "decrement" and decrement <= self.decrement_tol:
@@ -442,7 +456,10 @@ class Minimiser:
                 r_trial.copy(r)
                 norm = trial_norm
             self.problem.set_state(x)
-            return ROUNDOFF_REASON, norm
+            if norm <= target and self.stopping == "norm":
+                return (R.CONVERGED_FNORM_ABS if norm <= atol else R.CONVERGED_FNORM_RELATIVE,
+                        norm)
+            return POLISH_FAILED_REASON, norm
         finally:
             for v in (r, step, trial, r_trial):
                 v.destroy()

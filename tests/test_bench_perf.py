@@ -87,7 +87,8 @@ def test_baij_hessian_gives_the_same_step(tiny_scene):
         sim.minimiser.destroy()
     scale = np.abs(finals[0]).max()
     assert scale > 1e-4
-    assert np.abs(finals[0] - finals[1]).max() <= 1e-9 * scale
+    # the same iterates: measured bit for bit equal (README: "same iterates to 1e-16")
+    assert np.abs(finals[0] - finals[1]).max() <= 1e-15 * scale
 
 
 def test_bad_mat_type_is_named(tiny_scene):

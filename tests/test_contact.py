@@ -259,20 +259,26 @@ def test_friction_decelerates_a_sliding_block_at_mu_g(tmp_path):
         times.append(state.time)
         velocities.append(mean_velocity(sim, state, 0))
     slope = np.polyfit(times[2:15], velocities[2:15], 1)[0]
-    assert -slope == pytest.approx(mu * G, rel=0.1), (velocities, slope)
+    print("friction deceleration / (mu g) - 1:", -slope / (mu * G) - 1)
+    # measured 0.12 % (the lagged pressure of a settled block is m g to the barrier's
+    # equilibrium); a 7 % error in the friction pressure must show
+    assert -slope == pytest.approx(mu * G, rel=0.012), (velocities, slope)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("mu, slides", [(0.6, False), (0.1, True)])
+@pytest.mark.parametrize("mu, slides", [(0.6, False),
+                                        pytest.param(0.1, True, marks=pytest.mark.slow)])
 def test_block_on_tilted_plane_sticks_or_slides(tmp_path, mu, slides):
+    """Coulomb on a plane tilted by 20 degrees: mu = 0.6 > tan 20 sticks (in CI), mu = 0.1
+    slides at g (sin - mu cos) (slow)."""
     angle = math.radians(20.0)
     gravity = (G * math.sin(angle), 0.0, -G * math.cos(angle))  # the plane tilted by 20 deg
     sim, state = settled_block(tmp_path, mu, gravity, f"tilt{mu}", steps=30)
     v = mean_velocity(sim, state, 0)
     if slides:
         expected = G * (math.sin(angle) - mu * math.cos(angle)) * state.time
-        assert v == pytest.approx(expected, rel=0.15)
+        assert v == pytest.approx(expected, rel=0.05)  # measured 0.44 %
     else:
+        # measured 7.5e-3 m/s: the lagged friction's creep (|u_T| < eps_v h per step)
         assert abs(v) < 0.02 * G * math.sin(angle) * state.time
 
 

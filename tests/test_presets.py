@@ -6,7 +6,8 @@ the final displacement in ``final.vtu``. The iterative presets solve each Newton
 a relative residual of 1e-10, so Newton ends at the same minimiser. Measured: energies
 within 1.3e-12 and displacements within 6e-14 (relative) of ``cholesky``, the classical
 Richardson iterations included (damped Jacobi, Gauss-Seidel and SOR all converge on this
-Hessian; see :mod:`fem_anim.presets`). Asserted: 1e-9.
+Hessian; see :mod:`fem_anim.presets`). Asserted: 2e-11 and 1e-12 (README: "the same steps
+to 1e-12"). Every stats row of every preset meets the residual test.
 
 Precedence, lowest to highest: defaults < preset < scene ``[solver.petsc]`` < command line,
 observed through ``linear_its`` with ``cg-jacobi`` and ``ksp_rtol`` set in each layer.
@@ -21,7 +22,8 @@ from pathlib import Path
 import meshio
 import numpy as np
 import pytest
-from conftest import clean_environment, fem_anim_command, mpirun_command
+from conftest import (assert_rows_meet_the_test, clean_environment, fem_anim_command,
+                      mpirun_command)
 from mpi4py import MPI
 
 from fem_anim.cli import main
@@ -41,7 +43,10 @@ from fem_anim.simulation import solver_options
 SMALL = ["--set", "mesh.element_size=0.1", "--set", "time.steps=2",
          "--set", "output.render=false"]
 ENERGIES = ("kinetic", "elastic", "gravity")
-RTOL = 1e-9
+#: Every preset against cholesky, measured: energies within 1.9e-12 (cg-icc), final
+#: displacements within 6.1e-14 (richardson-jacobi), relative.
+ENERGY_RTOL = 2e-11
+DISPLACEMENT_RTOL = 1e-12
 
 #: Preconditioners that exist only for one process (PETSc's native factorisations).
 SERIAL_ONLY_PC = {"icc", "ilu"}
@@ -70,9 +75,9 @@ def assert_same_solution(run_dir: Path, reference: Path) -> None:
     assert [r["time"] for r in rows] == pytest.approx([r["time"] for r in ref])
     for row, expected in zip(rows, ref):
         for key in ENERGIES:
-            assert row[key] == pytest.approx(expected[key], rel=RTOL), (row["step"], key)
+            assert row[key] == pytest.approx(expected[key], rel=ENERGY_RTOL), (row["step"], key)
     u, u_ref = final_displacement(run_dir), final_displacement(reference)
-    assert np.linalg.norm(u - u_ref) <= RTOL * np.linalg.norm(u_ref)
+    assert np.linalg.norm(u - u_ref) <= DISPLACEMENT_RTOL * np.linalg.norm(u_ref)
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +94,7 @@ def reference(tmp_path_factory) -> Path:
 def test_preset_reaches_the_cholesky_solution(name, reference, tmp_path):
     rows = run(tmp_path / name, "--solver", name)
     assert_same_solution(tmp_path / name, reference)
-    assert all(r["snes_reason"] > 0 for r in rows)
+    assert_rows_meet_the_test(rows)
     options = PRESETS[name]
     if options["ksp_type"] == "preonly":  # one factorisation and solve per Newton step
         assert all(r["linear_its"] <= r["newton_its"] + 1 for r in rows)
@@ -212,18 +217,20 @@ def test_adaptive_forcing_reaches_the_same_solution_with_fewer_krylov_iterations
     tight = run(tmp_path / "tight", "--solver", name, *fine)
     adaptive = run(tmp_path / "adaptive", "--solver", name, *fine,
                    "--set", 'solver.forcing="adaptive"')
-    assert all(r["snes_reason"] > 0 for r in adaptive)
+    assert_rows_meet_the_test(tight)
+    assert_rows_meet_the_test(adaptive)
     newton = sum(r["newton_its"] for r in tight), sum(r["newton_its"] for r in adaptive)
     linear = sum(r["linear_its"] for r in tight), sum(r["linear_its"] for r in adaptive)
     assert newton[1] <= newton[0] + len(tight)  # at most one more Newton step per time step
     print(f"{name}: Newton its {newton}, Krylov its {linear}")
     assert linear[1] < 0.6 * linear[0]
     u, u_ref = final_displacement(tmp_path / "adaptive"), final_displacement(tmp_path / "tight")
-    # both are Newton to ||grad g|| <= 1e-8 ||grad g_0||: the same step to that tolerance
-    assert np.linalg.norm(u - u_ref) <= 1e-7 * np.linalg.norm(u_ref)
+    # both are Newton to ||grad g|| <= 1e-8 ||grad g_0||, and Newton's last step lands far
+    # below that: measured 1.3e-12 (displacement) and 3.4e-12 (energies) relative
+    assert np.linalg.norm(u - u_ref) <= 1e-10 * np.linalg.norm(u_ref)
     for a, t in zip(adaptive, tight):
         for key in ENERGIES:
-            assert a[key] == pytest.approx(t[key], rel=1e-7, abs=1e-12)
+            assert a[key] == pytest.approx(t[key], rel=1e-10, abs=1e-12)
 
 
 def test_adaptive_forcing_options_and_where_it_does_not_apply(tmp_path):

@@ -55,9 +55,10 @@ ASSEMBLY_RTOL = 1e4 * EPS
 #: Trajectories, positions: both Newton solvers stop at tight tolerances; measured <= 1.5e-9.
 TRAJECTORY_RTOL = 1e-8
 #: Trajectories, displacements (relative to the largest one, so small motions count too):
-#: measured <= 2.4e-9. The Minimiser may stop at its round-off floor (``ROUNDOFF_REASON``)
-#: before ``snes_rtol``: the backtracking line search cannot see a decrease of ``g`` below
-#: its floating-point resolution, which leaves residuals of ~1e-9 relative in some steps.
+#: measured <= 2.4e-9. The Minimiser may stop at its round-off floor before ``snes_rtol``
+#: (reported as ``POLISH_FAILED_REASON``): the backtracking line search cannot see a decrease
+#: of ``g`` below its floating-point resolution, which leaves residuals of ~1e-9 relative in
+#: some steps.
 DISPLACEMENT_RTOL = 1e-7
 
 MATERIALS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean")

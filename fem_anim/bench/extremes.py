@@ -7,9 +7,13 @@ Poisson ratio up to 0.4999, dt from 1e-5 to 1 s, a spinning body, a stretched an
 fully compressed bar, elements of aspect ratio 50 and more, a press that inverts
 elements in one step) with its expected outcome:
 
-- ``converges-bounded``: every step converges at once and the energy stays bounded
-  (for a conservative scene |E(t) - E_0| within half the exchanged energy,
-  :mod:`fem_anim.energy`; a case may add its own physical check);
+- ``converges-bounded``: every step converges at once and the energy stays bounded: in
+  a conservative scene (no damping, no moving pins) the total energy never exceeds its
+  initial value by more than :data:`ENERGY_GROWTH_BOUND` of the exchanged energy
+  (:mod:`fem_anim.energy`; the continuous system conserves E, implicit Euler and Newmark
+  on a nonlinear material may only lose it, up to the Newton tolerance), and in a scene
+  with moving pins (which do work on the body) it stays finite; a case may add its own
+  physical check;
 - ``recovers-by-substepping``: some steps fail, the adaptive stepper halves dt and the
   run completes (:class:`fem_anim.simulation.AdaptiveStepper`);
 - ``stops-with-message``: the run stops with a :class:`~fem_anim.errors.ConvergenceError`
@@ -17,6 +21,9 @@ elements in one step) with its expected outcome:
 
 A spinning body is checked for rotation invariance (the volume after half a turn): the
 linear material, which is not rotation invariant (seed eq. 36), is expected to fail it.
+The stiffest beam (E = 1e9 Pa, small strains: nearly linear) is checked against beam
+theory: released from rest under its weight, its tip never deflects beyond twice the
+static deflection (:func:`sag_bound`).
 
 :func:`run_case` measures the outcome; :func:`locking_rows` measures what volumetric
 locking does to P1 against P2 at nu = 0.4999 (quasi-static tip deflection under gravity).
@@ -42,9 +49,15 @@ from ..mesh import cell_volumes
 from ..scene import load_scene
 
 __all__ = ["Case", "Outcome", "cases", "run_case", "locking_rows", "mixed_locking_rows",
-           "format_table", "main", "scene_text", "OUTCOMES"]
+           "format_table", "main", "scene_text", "OUTCOMES", "ENERGY_GROWTH_BOUND",
+           "sag_bound"]
 
 OUTCOMES = ("converges-bounded", "recovers-by-substepping", "stops-with-message")
+
+#: Largest rise of the total energy above E_0 in a conservative scene, as a fraction of the
+#: exchanged energy. Measured at most 1.2e-4 (2D fast variants: nu = 0.4999 P1, Newmark);
+#: a scheme or a term that creates energy shows above 1e-2.
+ENERGY_GROWTH_BOUND = 1e-2
 
 
 @dataclass
@@ -55,7 +68,9 @@ class Case:
     keys: dict
     expected: str
     steps: int
-    check: str = ""  # "rigid": a rotation keeps the volume (a spinning body)
+    check: str = ""  # "rigid": a rotation keeps the volume (a spinning body); "sag": the
+    # tip of a stiff cantilever released under gravity never deflects beyond the bound of
+    # :func:`sag_bound`
 
 
 @dataclass
@@ -103,10 +118,14 @@ def _beam(dim: int, full: bool, size=None, es=None, gravity=True, **sections) ->
     return data
 
 
-#: Expected outcomes that differ between the 2D fast variant and the 3D grid (measured:
-#: README "Stability at the extremes"). Near incompressibility the volumetric term
-#: (lambda = 1.7e8 Pa at nu = 0.4999) dominates the step objective; in 3D, P2 at 0.05 m
-#: stalls: the line search finds no decrease at the round-off level of g, down to min_dt.
+#: Expected outcomes that differ between the 2D fast variant and the 3D grid. Whether a
+#: step needs substeps is the solver's behaviour, not physics: these four are measurements
+#: of the 3D grid (README "Stability at the extremes", ``fem-anim bench --extremes --full``),
+#: kept as the regression baseline. What physics does say is checked in every case: the
+#: energy bound (:data:`ENERGY_GROWTH_BOUND`), the volume of the spinning body, the sag of
+#: the stiff beam (:func:`sag_bound`). Near incompressibility the volumetric term (lambda =
+#: 1.7e8 Pa at nu = 0.4999) dominates the step objective; in 3D, P2 at 0.05 m stalls: the
+#: line search finds no decrease at the round-off level of g, down to min_dt.
 EXPECTED_3D = {"E = 1e+02 Pa": "recovers-by-substepping",
                "nu = 0.49, P2": "recovers-by-substepping",
                "nu = 0.4999, P1": "recovers-by-substepping",
@@ -129,7 +148,8 @@ def _cases(full: bool) -> list[Case]:
     out = []
     for E in ([1e2, 1e4, 1e6, 1e9] if full else [1e2, 1e9]):
         out.append(Case(f"E = {E:.0e} Pa", _beam(d, full, material={"youngs_modulus": E}),
-                        "converges-bounded", (15 if E <= 1e2 else 6) * n))
+                        "converges-bounded", (15 if E <= 1e2 else 6) * n,
+                        check="sag" if E >= 1e9 else ""))
     for nu in ([0.45, 0.49, 0.4999] if full else [0.4999]):
         if nu == 0.4999:  # the Taylor-Hood (u, p) formulation where P1 and P2 struggle
             out.append(Case(f"nu = {nu}, P2/P1 mixed", _beam(
@@ -179,6 +199,26 @@ def _cases(full: bool) -> list[Case]:
         d, full, size=thin, es=1.0, material={"youngs_modulus": 1e8}, time={"dt": 0.01}),
         "converges-bounded", 5 * n))
     return out
+
+
+def sag_bound(youngs_modulus: float, poisson_ratio: float, dim: int, length: float = 1.0,
+              height: float = 0.2, density: float = 1000.0, g: float = 9.81) -> float:
+    """Largest tip deflection of a cantilever released from rest under its own weight.
+
+    A load applied suddenly to a linear system at rest gives at most twice the static
+    displacement (energy: 1/2 k w^2 - q w <= 0, so w <= 2 q / k), and Newmark, the
+    trapezoidal rule, conserves that energy exactly for a linear system. The static tip
+    deflection of a cantilever under its own weight is Euler-Bernoulli's
+    w = q L^4 / (8 E' I) = 3 rho g L^4 / (2 E' h^2) (E' = E / (1 - nu^2) in plane strain),
+    plus Timoshenko's shear term q L^2 / (2 kappa G A): a ratio 4 E' I / (kappa G A L^2)
+    (kappa = 5/6) to the bending part. A coarse P1 mesh is stiffer than both, so the bound
+    holds with room; a doubled load or a halved stiffness breaks it.
+    """
+    e_eff = youngs_modulus / (1 - poisson_ratio ** 2) if dim == 2 else youngs_modulus
+    bending = 3 * density * g * length ** 4 / (2 * e_eff * height ** 2)
+    shear_modulus = youngs_modulus / (2 * (1 + poisson_ratio))
+    shear = 4 * e_eff * height ** 2 / 12 / (5 / 6 * shear_modulus * length ** 2)
+    return 2.0 * bending * (1.0 + shear)
 
 
 def _aspect_ratio(points: np.ndarray, cells: np.ndarray) -> float:
@@ -234,10 +274,19 @@ def run_case(case: Case, comm=None) -> Outcome:
     dt = scene["time"]["dt"]
     stepper = AdaptiveStepper(sim, dt, scene["time"])
     state, rows = sim.initial_state(), []
+    tip = None
+    if case.check == "sag":
+        from .measure import PointSampler
+
+        tip = PointSampler(sim.domain.mesh, np.array([[1.0, 0.1, 0.1][:sim.problem.d]]))
+        deflections = []
     try:
         for frame in range(1, case.steps + 1):
             for state, row in stepper.advance(state, frame * dt):
                 rows.append(row)
+                if tip is not None:
+                    sim.problem.u.x.array[:] = state.u
+                    deflections.append(-tip.sample(sim.problem.u)[0, -1])
     except ConvergenceError as err:
         message = str(err)  # its start (where) and its end (what to do) fit in a table cell
         if len(message) > 200:
@@ -250,16 +299,25 @@ def run_case(case: Case, comm=None) -> Outcome:
              "drift": report["drift"], "excursion": report["max_excursion"]}
     detail = f"{len(rows)} steps, {retries} retries, {info['newton_its']} Newton its"
     bounded = checked = all(math.isfinite(r["total_energy"]) for r in rows)
-    if report["conservative"]:  # no growth beyond half the exchanged energy (loss is damping)
+    if report["conservative"]:  # no growth beyond ENERGY_GROWTH_BOUND (a loss is damping)
         e0, scale = report["initial_energy"], report["exchanged_energy"]
-        bounded &= max(r["total_energy"] for r in rows) - e0 <= 0.5 * scale
+        growth = (max(r["total_energy"] for r in rows) - e0) / scale if scale > 0 else 0.0
+        info["growth"] = growth
+        bounded &= growth <= ENERGY_GROWTH_BOUND
         if report["drift"] is not None:  # None: nothing moved above round-off
             detail += f", energy drift {100 * report['drift']:+.2g} %"
+        detail += f", largest rise {100 * growth:.2g} %"
     if case.check == "rigid":  # rotation invariance: a turn does not inflate the body
         change = comm.bcast(_volume_change(sim, state), root=0)
         checked = abs(change) < 0.05
         info["volume_change"] = change
         detail += f", volume change {100 * change:+.2g} % after the half turn"
+    if case.check == "sag":
+        material = scene["material"]
+        bound = sag_bound(material["youngs_modulus"], material["poisson_ratio"], sim.problem.d)
+        info["sag_ratio"] = max(deflections) / bound
+        checked = 0.0 < max(deflections) <= bound
+        detail += f", tip sag {max(deflections):.3g} m <= bound {bound:.3g} m"
     if info["aspect"] >= 10:
         detail += f", aspect ratio {info['aspect']:.0f}"
     if not bounded or not checked:

@@ -10,7 +10,8 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.mass` - consistent and lumped mass matrices (eqs. (17)-(20)), gravity potential;
 * :mod:`.problem` - the potential energy with mass and pins;
 * :mod:`.mixed` - the perturbed-Lagrangian (u, p) energy of the mixed formulation (P1/P1);
-* :mod:`.contact` - the IPC log barrier against a plane or sphere obstacle (vertex rule);
+* :mod:`.contact` - the IPC log barrier against a plane or sphere obstacle and its lagged
+  friction (vertex rule);
 * :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
 * :mod:`.integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
 """
@@ -21,6 +22,8 @@ from fem_anim.reference.contact import (
     contact_energy,
     contact_gradient,
     contact_hessian,
+    friction_energy,
+    friction_gradient,
 )
 from fem_anim.reference.geometry import (
     cell_dofs,
@@ -76,6 +79,8 @@ __all__ = [
     "elastic_gradient",
     "elastic_hessian",
     "first_piola",
+    "friction_energy",
+    "friction_gradient",
     "first_piola_derivative",
     "gradient_operator",
     "gravity_energy",

@@ -13,6 +13,19 @@ grad d = r/|r|, Hess d = (I - r r^T/|r|^2)/|r| for a sphere |r| - R, r = x - c.
 An obstacle is a dict as in the scene's ``[[obstacle]]`` table: ``type`` ``"plane"``
 (``point``, ``normal``) or ``"sphere"`` (``center``, ``radius``), with ``dhat`` and
 ``stiffness``. Positions ``x`` are dof vectors, vertex-major (:mod:`.geometry`).
+
+Lagged friction (IPC section 5; :mod:`fem_anim.forms.contact`) with the same vertex rule:
+with x_n the positions at the start of the step, p_v = -kappa/d_hat b'(d(x_{n,v})) the
+frozen pressure, n_v the obstacle's unit normal at x_{n,v} (plane: n; sphere:
+(x_{n,v} - c)/|x_{n,v} - c|), u_v = (I - n_v n_v^T)(x_v - x_{n,v}) and y_v = |u_v|,
+
+    D(x) = mu sum_v A_v p_v f0(y_v),    grad_v D = mu A_v p_v f1(y_v) u_v / y_v,
+
+f0(y) = -y^3/(3 eps^2) + y^2/eps + eps/3 and f1(y) = f0'(y) = 2y/eps - y^2/eps^2 below
+eps, f0 = y and f1 = 1 above (so f1(y)/y = 2/eps - y/eps^2 stays finite at y = 0).
+The sphere's Hessian with the curvature term b' Hess d dropped (IPC's projection of the
+negative tangential eigenvalues, :meth:`fem_anim.contact.ObstacleContact.curvature_correction`)
+is :func:`contact_hessian` with ``projected=True``.
 """
 
 from __future__ import annotations
@@ -24,7 +37,8 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = ["boundary_facets", "vertex_areas", "barrier", "barrier_derivatives",
-           "contact_energy", "contact_gradient", "contact_hessian", "signed_distance"]
+           "contact_energy", "contact_gradient", "contact_hessian", "signed_distance",
+           "smoothed_slip", "friction_energy", "friction_gradient"]
 
 
 def boundary_facets(cells: np.ndarray) -> np.ndarray:
@@ -110,10 +124,16 @@ def contact_gradient(points, cells, x, obstacle) -> np.ndarray:
     return out
 
 
-def contact_hessian(points, cells, x, obstacle) -> sp.csr_matrix:
-    """Hess E_c, block diagonal (one dim x dim block per boundary vertex)."""
+def contact_hessian(points, cells, x, obstacle, projected: bool = False) -> sp.csr_matrix:
+    """Hess E_c, block diagonal (one dim x dim block per boundary vertex).
+
+    ``projected``: without the curvature term b' Hess d (zero for a plane; for a sphere the
+    negative tangential eigenvalues that IPC's per-contact projection removes).
+    """
     vertices, d, grad, hess, scale = _terms(points, cells, x, obstacle)
     db, d2b = barrier_derivatives(d, obstacle["dhat"])
+    if projected:
+        hess = np.zeros_like(hess)
     blocks = scale[:, None, None] * (d2b[:, None, None] * np.einsum("ni,nj->nij", grad, grad)
                                      + db[:, None, None] * hess)
     dim = points.shape[1]
@@ -123,3 +143,46 @@ def contact_hessian(points, cells, x, obstacle) -> sp.csr_matrix:
     cols = np.concatenate([vertices * dim + j for _, j in pairs])
     vals = np.concatenate([blocks[:, i, j] for i, j in pairs])
     return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+def smoothed_slip(y: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """f0(y) and f1(y)/y of the lagged friction (y >= 0)."""
+    below = y < eps
+    f0, f1_over_y = y.copy(), np.zeros_like(y)
+    f0[below] = _f0_below(y[below], eps)
+    f1_over_y[below] = 2.0 / eps - y[below] / eps ** 2
+    f1_over_y[~below] = 1.0 / y[~below]
+    return f0, f1_over_y
+
+
+def _f0_below(y: np.ndarray, eps: float) -> np.ndarray:
+    return -y ** 3 / (3.0 * eps ** 2) + y ** 2 / eps + eps / 3.0
+
+
+def _friction_terms(points, cells, x, x_prev, obstacle, eps):
+    vertices, d_prev, normal, _, scale = _terms(points, cells, x_prev, obstacle)
+    db, _ = barrier_derivatives(d_prev, obstacle["dhat"])
+    pressure = -obstacle["stiffness"] / obstacle["dhat"] * db
+    dim = points.shape[1]
+    du = (np.asarray(x, float) - np.asarray(x_prev, float)).reshape(-1, dim)[vertices]
+    tangential = du - np.einsum("ni,ni->n", normal, du)[:, None] * normal
+    y = np.linalg.norm(tangential, axis=1)
+    f0, f1_over_y = smoothed_slip(y, eps)
+    weight = obstacle["friction"] * scale * obstacle["dhat"] / obstacle["stiffness"] * pressure
+    return vertices, weight, tangential, f0, f1_over_y
+
+
+def friction_energy(points, cells, x, x_prev, obstacle, eps: float) -> float:
+    """D(x) = mu sum_v A_v p_v f0(|u_v|) (J) for the lagged state ``x_prev``."""
+    _, weight, _, f0, _ = _friction_terms(points, cells, x, x_prev, obstacle, eps)
+    return float(np.sum(weight * f0))
+
+
+def friction_gradient(points, cells, x, x_prev, obstacle, eps: float) -> np.ndarray:
+    """grad D = mu A_v p_v f1(|u_v|) u_v / |u_v| per boundary vertex, a dof vector."""
+    vertices, weight, tangential, _, f1_over_y = _friction_terms(points, cells, x, x_prev,
+                                                                 obstacle, eps)
+    dim = points.shape[1]
+    out = np.zeros(points.shape[0] * dim)
+    out.reshape(-1, dim)[vertices] = (weight * f1_over_y)[:, None] * tangential
+    return out

@@ -1,0 +1,366 @@
+"""Mutation check: plant realistic bugs one at a time and see that the suite catches each.
+
+Each entry of :data:`MUTATIONS` names a file, an exact piece of its text that occurs once,
+the text to put in its place (a wrong sign, factor, index or evaluation point), and the
+small test selection that must fail because of it. The script copies the repository's
+files (tracked and untracked, not ignored: the working state, not a commit) into a
+temporary directory outside the repository, checks once that Python really imports
+``fem_anim`` from that copy (a sentinel planted in the copy's ``fem_anim/__init__.py``
+must break ``import fem_anim``), then for each mutation edits the copy, runs the
+selection there with ``PYTHONPATH`` pointing at the copy, and restores the file. The
+worktree is never modified.
+
+A mutation is *caught* when its selection fails with the bug planted (and, unless
+``--no-baseline``, passes without it). The script prints caught / missed per mutation
+and the kill rate, and exits 1 if any mutation is missed (2 for a malformed list).
+
+It is not collected by pytest (its name does not start with ``test_``) and CI does not
+run it: a full run takes 4-8 minutes on 2 shared cores. ``tests/test_mutation_list.py``
+(fast, in CI) checks that every listed original text still occurs exactly once and that
+every selected test exists, so the list cannot rot silently when the code changes.
+
+Usage::
+
+    .venv/bin/python tests/mutation_check.py             # all mutations, with baselines
+    .venv/bin/python tests/mutation_check.py --list      # names and selections
+    .venv/bin/python tests/mutation_check.py --only friction-pressure-dhat sphere-curvature-sign
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+__all__ = ["Mutation", "MUTATIONS", "ROOT", "copy_tree", "main"]
+
+
+@dataclass(frozen=True)
+class Mutation:
+    """One planted bug.
+
+    Attributes:
+        name: Short identifier (``--only``).
+        path: File relative to the repository root.
+        original: Exact text replaced; must occur exactly once in the file.
+        replacement: The buggy text.
+        tests: pytest node ids (``tests/test_x.py::test_y`` or ``...::test_y[param]``)
+            of which at least one must fail.
+        why: What the bug is, in words.
+    """
+
+    name: str
+    path: str
+    original: str
+    replacement: str
+    tests: tuple[str, ...]
+    why: str
+
+
+IND = "tests/test_independent_checks.py"
+CONTACT = "tests/test_contact.py"
+REF = "tests/test_reference_comparison.py"
+
+MUTATIONS: list[Mutation] = [
+    # -- the six bugs of issue 19 ------------------------------------------------------------
+    Mutation("friction-pressure-dhat", "forms/contact.py",
+             "- (d - dhat) ** 2 / d, 0.0)", "- (d - dhat) ** 2 / dhat, 0.0)",
+             (f"{IND}::test_friction_matches_reference",),
+             "barrier derivative with d_hat where d belongs: friction pressure off by ~7 %"),
+    Mutation("sphere-curvature-sign", "fem_anim/contact.py",
+             'terms.append(-ob["stiffness"] / ob["dhat"] * slope',
+             'terms.append(ob["stiffness"] / ob["dhat"] * slope',
+             (f"{IND}::test_projected_sphere_hessian_matches_reference",),
+             "curvature correction of the sphere barrier's Hessian with the wrong sign"),
+    Mutation("filter-wrong-trial", "fem_anim/solver.py",
+             "trial.axpy(-1.0, y)", "trial.axpy(1.0, y)",
+             (f"{IND}::test_inversion_filter_halves_a_constructed_step",),
+             "inversion filter checks x + y instead of the trial point x - y"),
+    Mutation("swap-rtol-atol", "fem_anim/presets.py",
+             '"snes_rtol": "1e-8",\n    "snes_atol": "1e-12",',
+             '"snes_rtol": "1e-12",\n    "snes_atol": "1e-8",',
+             (f"{IND}::test_every_accepted_step_meets_the_residual_test",),
+             "Newton's default relative and absolute tolerances swapped"),
+    Mutation("p2-mass-low-quadrature", "forms/inertia.py",
+             'dx(metadata={"quadrature_degree": 2 * degree})',
+             'dx(metadata={"quadrature_degree": degree + 1})',
+             (f"{IND}::test_consistent_mass_moments_are_exact[2]",),
+             "consistent mass integrated below degree 2k: inexact for P2"),
+    Mutation("rayleigh-beta-factor", "forms/damping.py",
+             "term = coefficient * beta * linear.psi(",
+             "term = coefficient * 2.0 * beta * linear.psi(",
+             (f"{IND}::test_rayleigh_damping_decays_a_mode_at_the_closed_form_rate",),
+             "stiffness-proportional damping twice too strong"),
+    # -- forms/ ----------------------------------------------------------------------------------
+    Mutation("rayleigh-alpha-half", "forms/damping.py",
+             "form = coefficient * alpha * 0.5 * rho", "form = coefficient * alpha * rho",
+             (f"{IND}::test_rayleigh_damping_decays_a_mode_at_the_closed_form_rate",),
+             "mass-proportional damping twice too strong (1/2 lost)"),
+    Mutation("inertia-half", "forms/inertia.py",
+             "return 0.5 * rho * ufl.inner(w, w) * dx_mass",
+             "return rho * ufl.inner(w, w) * dx_mass",
+             (f"{REF}::test_step_objective[3-neohookean]",),
+             "inertia term 1/2 ||x - y||_M^2 without its 1/2"),
+    Mutation("kinetic-half", "forms/inertia.py",
+             "return 0.5 * rho * ufl.inner(v, v) * dx_mass",
+             "return rho * ufl.inner(v, v) * dx_mass",
+             (f"{IND}::test_consistent_mass_moments_are_exact[1]",),
+             "kinetic energy without its 1/2"),
+    Mutation("neohookean-sign", "forms/neohookean.py",
+             "- mu * lnJ + lmbda / 2 * lnJ**2", "+ mu * lnJ + lmbda / 2 * lnJ**2",
+             (f"{REF}::test_elastic_energy_gradient_hessian[3-neohookean-perturbed]",),
+             "neo-Hookean -mu ln J with the wrong sign (stress at rest)"),
+    Mutation("stvk-lambda-factor", "forms/stvk.py",
+             "lmbda / 2 * ufl.tr(E) ** 2", "lmbda * ufl.tr(E) ** 2",
+             (f"{REF}::test_elastic_energy_gradient_hessian[3-stvk-perturbed]",),
+             "StVK volumetric term twice too stiff"),
+    Mutation("lame-mu", "forms/lame.py",
+             "mu = E / (2 * (1 + nu))", "mu = E / (2 * (1 - nu))",
+             ("tests/test_forms_materials.py::test_lame_parameters",),
+             "shear modulus with 1 - nu"),
+    Mutation("gravity-sign", "forms/gravity.py",
+             "return -rho * ufl.inner(g, u) * dx", "return rho * ufl.inner(g, u) * dx",
+             ("tests/test_integrators.py::test_newmark_free_fall_is_exact[consistent]",),
+             "gravity pushes up"),
+    Mutation("friction-tangent-sign", "forms/contact.py",
+             "u_T = du - ufl.dot(normal_n, du) * normal_n",
+             "u_T = du + ufl.dot(normal_n, du) * normal_n",
+             (f"{IND}::test_friction_matches_reference",),
+             "friction's tangential projection with the wrong sign"),
+    Mutation("friction-smoothing", "forms/contact.py",
+             "+ y2 / eps\n", "+ y2 / (2.0 * eps)\n",
+             (f"{IND}::test_friction_matches_reference",),
+             "f0's quadratic term halved: f0 no longer C^1 at eps"),
+    # -- fem_anim/ physics -----------------------------------------------------------------------
+    Mutation("friction-lag-point", "fem_anim/contact.py",
+             "x_n = self.X + u_prev", "x_n = self.X + u",
+             (f"{IND}::test_friction_matches_reference",),
+             "friction pressure and normal taken at the current, not the lagged, point"),
+    Mutation("vertex-rule-weight", "fem_anim/contact.py",
+             "weights = np.full(tdim, 1.0 / math.factorial(tdim - 1) / tdim)",
+             "weights = np.full(tdim, 1.0 / tdim)",
+             (f"{CONTACT}::test_barrier_matches_reference[plane-3]",),
+             "vertex rule without the reference facet's area 1/(d-1)!"),
+    Mutation("friction-mu-half", "fem_anim/contact.py",
+             'pressure, ob["friction"],', 'pressure, 0.5 * ob["friction"],',
+             (f"{CONTACT}::test_block_on_tilted_plane_sticks_or_slides[0.6-False]",),
+             "friction coefficient halved: a block that must stick slides"),
+    Mutation("keep-fraction", "fem_anim/contact.py",
+             "keep = (1.0 - KEEP_FRACTION) * d0", "keep = KEEP_FRACTION * d0",
+             (f"{CONTACT}::test_step_bound_stops_at_keep_fraction",),
+             "step bound keeps the wrong fraction of the distance"),
+    Mutation("sphere-bound-root", "fem_anim/contact.py",
+             "root = c0[hit] / (ab[hit] + np.sqrt(disc[hit]))",
+             "root = c0[hit] / (ab[hit] - np.sqrt(disc[hit]))",
+             (f"{CONTACT}::test_step_bound_stops_at_keep_fraction",),
+             "sphere step bound takes the far root of the quadratic"),
+    Mutation("newmark-predictor", "fem_anim/integrator.py",
+             "0.25 * h * h * state.a  # seed eq. 3", "0.5 * h * h * state.a  # seed eq. 3",
+             ("tests/test_integrators.py::test_newmark_free_fall_is_exact[consistent]",),
+             "Newmark predictor with h^2/2 a_n"),
+    Mutation("newmark-velocity", "fem_anim/integrator.py",
+             "v_new = state.v + 0.5 * h * (state.a + a_new)", "v_new = state.v + h * a_new",
+             ("tests/test_integrators.py::test_newmark_free_fall_is_exact[consistent]",),
+             "Newmark velocity update with the end-point acceleration only"),
+    Mutation("newmark-damping-anchor", "fem_anim/integrator.py",
+             "return w / (0.5 * h), state.u + 0.5 * h * state.v",
+             "return w / h, state.u + 0.5 * h * state.v",
+             (f"{IND}::test_rayleigh_damping_decays_a_mode_at_the_closed_form_rate",),
+             "Newmark damping potential with tau = h instead of h/2"),
+    Mutation("bdf2-predictor", "fem_anim/integrator.py",
+             "h * (8.0 * state.v - 2.0 * state.v_old) / 9.0",
+             "h * (8.0 * state.v + 2.0 * state.v_old) / 9.0",
+             ("tests/test_integrators.py::test_order_of_accuracy_linear[bdf2]",),
+             "BDF2 predictor with the wrong sign of v_{n-1}"),
+    # -- solver ----------------------------------------------------------------------------------
+    Mutation("polish-always-converged", "fem_anim/solver.py",
+             "return POLISH_FAILED_REASON, norm", "return ROUNDOFF_REASON, norm",
+             (f"{IND}::test_polish_meets_the_test_or_reports_it",),
+             "a polish that missed the residual test reported as converged"),
+    Mutation("relative-test-loose", "fem_anim/solver.py",
+             "elif fnorm <= rtol * self._history[0][0]:",
+             "elif fnorm <= rtol * self._history[0][0] * 1e6:",
+             (f"{IND}::test_every_accepted_step_meets_the_residual_test",),
+             "relative residual test a million times too loose"),
+    Mutation("filter-threshold", "fem_anim/solver.py",
+             "if self.problem.min_det_F() > 0.0:", "if self.problem.min_det_F() > -1.0:",
+             (f"{IND}::test_inversion_filter_halves_a_constructed_step",),
+             "inversion filter accepts det F > -1 (inverted elements)"),
+    Mutation("contact-points-swapped", "fem_anim/contact.py",
+             "return values[:, 0], values[:, 1]", "return values[:, 1], values[:, 0]",
+             (f"{CONTACT}::test_step_bound_stops_at_keep_fraction[plane]",),
+             "contact points and search directions read from the wrong columns"),
+    Mutation("newmark-weight", "forms/integrator.py",
+             'Scheme("newmark", 2, 0.25)', 'Scheme("newmark", 2, 0.5)',
+             ("tests/test_integrators.py::test_newmark_free_fall_is_exact[consistent]",),
+             "Newmark's energy weight h^2/2 instead of h^2/4"),
+    Mutation("contact-energy-scale", "forms/contact.py",
+             "return kappa / dhat * barrier(d, dhat) * ds", "return kappa * barrier(d, dhat) * ds",
+             (f"{CONTACT}::test_barrier_matches_reference[plane-3]",),
+             "contact energy without its 1/d_hat (kappa no longer a pressure)"),
+    Mutation("bdf2-velocity", "fem_anim/integrator.py",
+             "v_new = 1.5 / h * (u_new", "v_new = 1.0 / h * (u_new",
+             ("tests/test_integrators.py::test_order_of_accuracy_linear[bdf2]",),
+             "BDF2 velocity update with 1/h instead of 3/(2h)"),
+    # -- the numpy reference (an oracle with a bug must be caught too) ---------------------------
+    Mutation("reference-barrier-curvature", "fem_anim/reference/contact.py",
+             "+ t ** 2 / a ** 2", "- t ** 2 / a ** 2",
+             (f"{CONTACT}::test_reference_derivatives_by_finite_differences[plane]",),
+             "reference barrier b'' with a wrong sign"),
+    Mutation("reference-friction-eps", "fem_anim/reference/contact.py",
+             "return -y ** 3 / (3.0 * eps ** 2) + y ** 2 / eps + eps / 3.0",
+             "return -y ** 3 / (3.0 * eps ** 2) + y ** 2 / eps + eps / 2.0",
+             (f"{IND}::test_reference_friction_gradient_by_finite_differences",),
+             "reference f0 discontinuous at eps"),
+]
+
+
+def copy_tree(dest: Path) -> None:
+    """Copy the repository's working files (tracked + untracked, not ignored) into ``dest``.
+
+    ``fem_anim.forms`` and ``fem_anim.meshes`` live in ``forms/`` and ``meshes/`` (the
+    package-dir mapping of pyproject.toml); links inside the copy make the plain
+    ``PYTHONPATH`` layout find them there.
+    """
+    listed = subprocess.run(["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=ROOT,
+                            check=True, capture_output=True).stdout.decode().split("\0")
+    for name in filter(None, listed):
+        src = ROOT / name
+        if not src.is_file():
+            continue  # deleted in the working tree
+        target = dest / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(src, target)
+    (dest / "fem_anim" / "forms").symlink_to(dest / "forms")
+    (dest / "fem_anim" / "meshes").symlink_to(dest / "meshes")
+
+
+def environment(scratch: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(scratch) + os.pathsep + env.get("PYTHONPATH", "")
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    return env
+
+
+def verify_isolation(scratch: Path) -> None:
+    """Python must import fem_anim (and fem_anim.forms) from the copy, not the worktree.
+
+    Plants a sentinel in the copy's ``fem_anim/__init__.py``: ``import fem_anim`` must then
+    fail with it; without it, the modules' files must lie in the copy.
+    """
+    init = scratch / "fem_anim" / "__init__.py"
+    text = init.read_text()
+    init.write_text('raise ImportError("mutation_check sentinel")\n' + text)
+    broken = subprocess.run([sys.executable, "-c", "import fem_anim"], cwd=scratch,
+                            env=environment(scratch), capture_output=True, text=True)
+    init.write_text(text)
+    if "mutation_check sentinel" not in broken.stderr:
+        raise SystemExit("mutation_check: a broken fem_anim in the scratch copy still imports; "
+                         "the tests would not see the mutations")
+    where = subprocess.run(
+        [sys.executable, "-c", "import fem_anim, fem_anim.forms.contact as c, fem_anim.solver as s;"
+         "print(fem_anim.__file__); print(c.__file__); print(s.__file__)"],
+        cwd=scratch, env=environment(scratch), capture_output=True, text=True, check=True)
+    for line in where.stdout.split():
+        if not Path(line).resolve().is_relative_to(scratch.resolve()):
+            raise SystemExit(f"mutation_check: {line} is imported from outside the scratch copy")
+
+
+def run_selection(scratch: Path, tests: tuple[str, ...], timeout: float) -> tuple[int, float, str]:
+    """pytest on ``tests`` in the copy: (exit code, seconds, last lines of its output)."""
+    start = time.perf_counter()
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+           "-m", "not slow or slow", *tests]
+    try:
+        out = subprocess.run(cmd, cwd=scratch, env=environment(scratch), capture_output=True,
+                             text=True, timeout=timeout)
+        code, text = out.returncode, out.stdout + out.stderr
+    except subprocess.TimeoutExpired:
+        code, text = -1, "timeout"
+    tail = " | ".join(line for line in text.strip().splitlines()[-3:])
+    return code, time.perf_counter() - start, tail
+
+
+def check_list(mutations: list[Mutation]) -> list[str]:
+    """Problems with the list itself: a missing file, an original text not found exactly once."""
+    problems = []
+    for m in mutations:
+        path = ROOT / m.path
+        if not path.is_file():
+            problems.append(f"{m.name}: no file {m.path}")
+            continue
+        count = path.read_text().count(m.original)
+        if count != 1:
+            problems.append(f"{m.name}: original text occurs {count} times in {m.path}")
+        if m.original == m.replacement:
+            problems.append(f"{m.name}: replacement equals the original")
+    names = [m.name for m in mutations]
+    problems += [f"duplicate name {n}" for n in set(names) if names.count(n) > 1]
+    return problems
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--only", nargs="*", help="names of the mutations to run")
+    parser.add_argument("--list", action="store_true", help="list the mutations and exit")
+    parser.add_argument("--no-baseline", action="store_true",
+                        help="skip running each selection on the unmutated copy")
+    parser.add_argument("--timeout", type=float, default=600.0, help="seconds per pytest run")
+    args = parser.parse_args(argv)
+    mutations = [m for m in MUTATIONS if not args.only or m.name in args.only]
+    if args.list:
+        for m in mutations:
+            print(f"{m.name:28s} {m.path:32s} {' '.join(m.tests)}")
+        return 0
+    problems = check_list(mutations)
+    if args.only and len(mutations) != len(set(args.only)):
+        problems.append(f"unknown names in --only: {set(args.only) - {m.name for m in MUTATIONS}}")
+    if problems:
+        print("\n".join(problems), file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory(prefix="fem_anim_mutation_") as tmp:
+        scratch = Path(tmp) / "repo"
+        copy_tree(scratch)
+        verify_isolation(scratch)
+        print(f"scratch copy {scratch}: imports verified", flush=True)
+        baseline: dict[tuple[str, ...], int] = {}
+        results = []
+        for m in mutations:
+            if not args.no_baseline and m.tests not in baseline:
+                code, seconds, tail = run_selection(scratch, m.tests, args.timeout)
+                baseline[m.tests] = code
+                if code != 0:
+                    print(f"BASELINE FAILS {' '.join(m.tests)} ({seconds:.0f} s): {tail}",
+                          flush=True)
+            path = scratch / m.path
+            text = path.read_text()
+            path.write_text(text.replace(m.original, m.replacement, 1))
+            try:
+                code, seconds, tail = run_selection(scratch, m.tests, args.timeout)
+            finally:
+                path.write_text(text)
+            # exit code 1: tests failed; 2-5: interrupted, internal or usage error, no tests
+            caught = code == 1 and baseline.get(m.tests, 0) == 0
+            results.append((m, caught))
+            verdict = "caught" if caught else "MISSED"
+            print(f"{verdict:7s} {m.name:28s} ({seconds:5.0f} s, pytest exit {code}) {tail}",
+                  flush=True)
+    killed = sum(caught for _, caught in results)
+    print(f"kill rate: {killed}/{len(results)}"
+          + (f" ({100.0 * killed / len(results):.0f} %)" if results else ""))
+    missed = [m.name for m, caught in results if not caught]
+    if missed:
+        print("missed: " + ", ".join(missed))
+    return 1 if missed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
