@@ -7,10 +7,18 @@ SIGINT and SIGTERM to every rank, not necessarily at the same moment), writes a
 checkpoint there, and raises :class:`~fem_anim.errors.Interrupted`. A second signal
 does not wait for the frame to end: it raises at once (the last periodic checkpoint
 and the frames so far stay on disk either way; nothing is deleted).
+
+A launcher that dies without forwarding a signal (``mpirun`` killed with SIGKILL; OpenMPI 5
+also puts every rank in a process group of its own, so a signal to the launcher's group
+does not reach them) would leave its ranks running on their own, holding the run's files.
+Each rank of a parallel run therefore notes its parent process when the run starts and
+counts a change of parent (the launcher gone, the rank adopted) as SIGHUP, the hang-up of
+its controlling process: the ranks stop at the same frame, checkpointed and resumable.
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 
@@ -30,8 +38,11 @@ class Interrupts:
         self.comm = comm
         self.received: int | None = None
         self._previous: dict[int, object] = {}
+        self._parent: int | None = None  # a parallel run's launcher (or its daemon)
 
     def __enter__(self) -> Interrupts:
+        if self.comm.size > 1:
+            self._parent = os.getppid()
         if threading.current_thread() is threading.main_thread():
             for signum in SIGNALS:
                 self._previous[signum] = signal.signal(signum, self._handle)
@@ -49,6 +60,9 @@ class Interrupts:
 
     def pending(self) -> int | None:
         """The signal every rank stops for, or None (collective: call once per frame)."""
+        if self.received is None and self._parent is not None and \
+                os.getppid() != self._parent:
+            self.received = signal.SIGHUP  # the launcher is gone
         mine = self.received if self.received is not None else 0
         signum = self.comm.allreduce(mine, op=MPI.MAX)
         return signum or None

@@ -22,7 +22,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 import pytest
-from conftest import clean_environment, fem_anim_command, mpirun_command
+from conftest import clean_environment, fem_anim_command, mpirun_command, process_tree
 
 from fem_anim.cli import main
 from fem_anim.rundir import LOCK, MARKER, install, read_manifest, write_manifest
@@ -116,6 +116,43 @@ def test_signal_keeps_the_run_and_prints_the_resume_command(tmp_path, sig):
     assert frames(out / "trajectory.xdmf") == 121
     steps = [int(r.split(",")[0]) for r in (out / "stats.csv").read_text().splitlines()[1:]]
     assert steps == list(range(1, len(steps) + 1))
+
+
+@pytest.mark.mpi
+def test_ranks_checkpoint_and_stop_when_the_launcher_is_killed(tmp_path):
+    """mpirun killed with SIGKILL forwards nothing (and OpenMPI 5 puts each rank in its own
+    process group): the ranks see their parent change, stop at the same frame with a
+    checkpoint (none is due on their own here) and leave no process behind."""
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    out = tmp_path / "run"
+    args = ["run", "-q", *COARSE, "--set", "time.steps=400", "--set",
+            "output.checkpoint_every=1000", "-o", str(out)]
+    proc = start(args, mpirun)
+    wait_for_rows(out, 5, proc)
+    ranks = [p for p in process_tree(proc.pid)[1:]
+             if b"fem_anim" in Path(f"/proc/{p}/cmdline").read_bytes()]
+    assert len(ranks) == 2
+    os.kill(proc.pid, signal.SIGKILL)  # the launcher alone
+    proc.communicate()
+
+    def running(pid: int) -> bool:
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return False
+
+    deadline = time.time() + 60
+    while any(running(p) for p in ranks) and time.time() < deadline:
+        time.sleep(0.05)
+    assert not any(running(p) for p in ranks)
+    meta = checkpoint_meta(out / ".partial" / "checkpoint.npz")
+    assert 5 <= meta["frame"] < 400
+    done = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=400", "--set",
+                     "output.checkpoint_every=1000", "--resume", str(out)])
+    assert done.returncode == 0, done.stderr
+    assert frames(out / "trajectory.xdmf") == 401
 
 
 @pytest.mark.mpi
