@@ -144,17 +144,16 @@ def describe_energy(report: dict, scene) -> str:
     """One line for the terminal: the drift, and a warning for a gain or a loss that the
     scene does not explain, with advice only where it applies."""
     integrator = scene["time"]["integrator"]
+    unconverged = report.get("unconverged_steps") or []
+    unmet = (f"; {len(unconverged)} step(s) stopped at the round-off floor without meeting "
+             f"the stopping test (first: step {unconverged[0]})") if unconverged else ""
     if report["drift"] is None:
         return (f"no energy exchanged above round-off ({report['exchanged_energy']:.3g} J): "
-                "the body stayed at rest")
+                f"the body stayed at rest{unmet}")
     pct = 100.0 * report["drift"]
     base = (f"energy drift {pct:+.3g} % of the exchanged energy "
             f"({report['exchanged_energy']:.4g} J), max excursion "
-            f"{100.0 * report['max_excursion']:.3g} %")
-    unconverged = report.get("unconverged_steps") or []
-    if unconverged:
-        base += (f"; {len(unconverged)} step(s) stopped at the round-off floor without "
-                 f"meeting the stopping test (first: step {unconverged[0]})")
+            f"{100.0 * report['max_excursion']:.3g} %{unmet}")
     if report["damped"]:
         # newmark gains energy at impacts (NEWMARK_CONTACT): not advised for contact
         advice = "a smaller time.dt" if integrator == "newmark" or scene["obstacle"] else \
