@@ -101,11 +101,13 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
 
     from .energy import describe_energy, energy_report, initial_energies, write_summary
     from .provenance import software_versions
+    from .interrupt import stop_at_once
     from .rundir import read_manifest, write_manifest
 
     quiet_jit_logging()
-    sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
-    initial = initial_energies(sim)
+    with stop_at_once():  # a signal while meshing or compiling: stop, leave no JIT lock
+        sim = Simulation(scene, MPI.COMM_WORLD, cli_options, preset=args.solver)
+        initial = initial_energies(sim)
     try:
         result = sim.run(Path(out), quiet=args.quiet, resume=args.resume is not None)
     except (ConvergenceError, Interrupted) as err:

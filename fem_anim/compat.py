@@ -37,6 +37,11 @@ drives its own SNES) and merges the blocked assemblers (fem_anim assembles one s
 
 from __future__ import annotations
 
+import os
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
 import dolfinx
 import ffcx
 import ffcx.codegeneration.jit
@@ -66,6 +71,7 @@ __all__ = [
     "basix_cell",
     "reference_quadrature",
     "compile_forms_together",
+    "jit_locks_released",
 ]
 
 #: (major, minor) of the DOLFINx in use.
@@ -302,3 +308,32 @@ def _current_form(form: ufl.Form, ufcx_form, module, code, mesh):
         module.ffi.cast("uintptr_t", module.ffi.addressof(ufcx_form)), spaces, coefficients,
         constants, subdomains, {}, mesh)
     return fem.Form(cpp_form, ufcx_form, code, module)
+
+
+@contextmanager
+def jit_locks_released(jit_options: dict | None = None):
+    """Release the JIT-cache locks that a compile interrupted inside this block leaves.
+
+    FFCx (0.5 and 0.9 alike) takes ``<module>.c`` in the cache as a lock and writes
+    ``<module>.c.cached`` when the module is ready; on an Exception it renames the lock to
+    ``.c.failed``, but a KeyboardInterrupt or a kill leaves it, and every later compile of
+    that module waits ``timeout`` seconds and fails ("JIT compilation timed out"). When the
+    block ends with a BaseException that is not an Exception (KeyboardInterrupt, SystemExit),
+    the locks made since it began that have no ``.c.cached`` are renamed as FFCx does.
+    """
+    options = jit.get_parameters(jit_options) if LEGACY else jit.get_options(jit_options)
+    cache = Path(str(options["cache_dir"])).expanduser()
+    since = time.time() - 1.0
+    try:
+        yield
+    except BaseException as err:
+        if isinstance(err, Exception):  # FFCx released its lock itself
+            raise
+        for lock in cache.glob("libffcx_*.c"):
+            try:
+                if lock.stat().st_mtime >= since and \
+                        not lock.with_suffix(".c.cached").exists():
+                    os.replace(lock, lock.with_suffix(".c.failed"))
+            except OSError:
+                pass
+        raise

@@ -26,7 +26,7 @@ from mpi4py import MPI
 
 from .errors import Interrupted
 
-__all__ = ["Interrupts", "SIGNALS"]
+__all__ = ["Interrupts", "SIGNALS", "stop_at_once"]
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
@@ -66,3 +66,34 @@ class Interrupts:
         mine = self.received if self.received is not None else 0
         signum = self.comm.allreduce(mine, op=MPI.MAX)
         return signum or None
+
+
+class stop_at_once:
+    """Context manager: during set-up (meshing, compiling forms) a signal of :data:`SIGNALS`
+    raises :class:`~fem_anim.errors.Interrupted` at once.
+
+    There is nothing to keep yet, but a compile killed by SIGTERM, or stopped by SIGINT's
+    KeyboardInterrupt (a BaseException FFCx does not clean up after), would leave FFCx's
+    lock file in the JIT cache, and every later run would wait for it and fail. FFCx
+    releases its lock on an Exception, which :class:`Interrupted` is (see also
+    :func:`fem_anim.compat.jit_locks_released`).
+    """
+
+    def __init__(self):
+        self._previous: dict[int, object] = {}
+
+    def __enter__(self) -> stop_at_once:
+        if threading.current_thread() is threading.main_thread():
+            for signum in SIGNALS:
+                self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous.clear()
+
+    @staticmethod
+    def _handle(signum: int, frame) -> None:
+        raise Interrupted(f"interrupted by {signal.Signals(signum).name} while setting up "
+                          "(nothing to keep yet)", signum)

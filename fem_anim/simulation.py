@@ -21,6 +21,7 @@ from petsc4py import PETSc
 
 from dolfinx.fem import petsc as fem_petsc
 
+from . import compat
 from .checkpoint import load_checkpoint, save_checkpoint
 from .energy import moving_pins
 from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
@@ -33,7 +34,7 @@ from .output import (CellGather, RunDirectory, StatsWriter, TrajectoryWriter, Ve
 from .petsc_options import flatten_options, merge_options
 from .presets import (MIXED_ONLY_PRESETS, NEWTON_DEFAULTS, drop_replaced, forcing_options,
                       parallel_note, preset_options)
-from .problem import EnergyProblem
+from .problem import JIT_OPTIONS, EnergyProblem
 from .progress import Progress
 from .provenance import WallClock
 from .scene_consistency import MIXED_PRESETS
@@ -122,7 +123,8 @@ class Simulation:
             print(f"fem-anim: {note}", file=sys.stderr)
         with self.clock.phase("mesh"):
             self.domain = domain if domain is not None else build_mesh(comm, scene)
-        self.problem = EnergyProblem(scene, self.domain)
+        with compat.jit_locks_released(JIT_OPTIONS):  # a Ctrl-C while compiling
+            self.problem = EnergyProblem(scene, self.domain)
         self.integrator = Integrator(scene["time"]["integrator"])
         self.minimiser = Minimiser(self.problem, options, settings=scene["solver"])
         self.minimiser.require_read(cli_options or {})

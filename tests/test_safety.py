@@ -542,3 +542,31 @@ def test_demos_write_no_tracked_file():
         text = demo.read_text()
         assert not re.search(r"HERE / \"[\w.]+\.(png|gif|csv|md)\"", text), demo.name
         assert "savefig(HERE" not in text, demo.name
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_while_compiling_leaves_no_jit_lock(tmp_path, sig):
+    """Stopped while FFCx compiles the forms (a fresh cache), the run ends with one line and
+    the next run compiles and finishes: FFCx's lock file (``<module>.c`` without
+    ``.c.cached``) is not left behind to make every later run time out."""
+    env = clean_environment() | {"XDG_CACHE_HOME": str(tmp_path / "cache")}
+    args = fem_anim_command() + ["run", "-q", *COARSE, "--set", "time.steps=2"]
+    proc = subprocess.Popen(args + ["-o", str(tmp_path / "first")], env=env, cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        locks = [c for c in (tmp_path / "cache").rglob("libffcx_forms_*.c")
+                 if not c.with_suffix(".c.cached").exists()]
+        if locks or proc.poll() is not None:
+            break
+        time.sleep(0.005)
+    assert locks, "the run compiled nothing"
+    proc.send_signal(sig)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode != 0
+    assert "Traceback" not in stderr
+    assert not [c for c in (tmp_path / "cache").rglob("libffcx_*.c")
+                if not c.with_suffix(".c.cached").exists()]
+    again = subprocess.run(args + ["-o", str(tmp_path / "second")], env=env, cwd=tmp_path,
+                           capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
