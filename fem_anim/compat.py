@@ -32,6 +32,7 @@ __all__ = [
     "cell_space",
     "quadrature_space",
     "petsc_vec",
+    "cell_dofs",
     "geometry_dofmap",
     "create_mesh",
     "colliding_cells",
@@ -64,6 +65,13 @@ def petsc_vec(u: fem.Function):
     """The PETSc vector that holds a Function's degrees of freedom."""
     return u.vector
 
+
+
+def cell_dofs(V) -> np.ndarray:
+    """Cell -> dof (block) indices of a function space as a (num_cells, dofs_per_cell) array
+    (0.9: ``V.dofmap.list`` is that array already)."""
+    dofs = V.dofmap.list.array
+    return dofs.reshape(-1, V.dofmap.dof_layout.num_dofs)
 
 
 def geometry_dofmap(mesh) -> np.ndarray:

@@ -38,7 +38,7 @@ RENDER_PRODUCTS = ("final.png", "frames", "animation.gif", "animation.mp4", "ene
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "newton_decrement", "shift", "kinetic", "elastic", "gravity",
                  "contact", "total_energy", "assembly_s", "factor_s", "linear_solve_s", "other_s",
-                 "solve_wall_s", "step_wall_s"]
+                 "solve_wall_s", "step_wall_s", "contact_s", "contact_pairs"]
 
 
 class VertexGather:

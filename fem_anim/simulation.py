@@ -25,7 +25,8 @@ from .checkpoint import load_checkpoint, save_checkpoint
 from .errors import ConvergenceError, FemAnimError
 from .initial import initial_velocity
 from .integrator import Integrator, State
-from .mesh import SimplexMesh, build_mesh
+from .body import build_scene_mesh
+from .mesh import SimplexMesh
 from .output import (CellGather, RunDirectory, StatsWriter, TrajectoryWriter, VertexGather,
                      write_final, write_scene)
 from .petsc_options import flatten_options, merge_options
@@ -103,11 +104,12 @@ class Simulation:
         note = parallel_note(preset or scene["solver"]["preset"], comm.size)
         if note and comm.rank == 0:
             print(f"fem-anim: {note}", file=sys.stderr)
-        self.domain = domain if domain is not None else build_mesh(comm, scene)
+        self.domain = domain if domain is not None else build_scene_mesh(comm, scene)
         self.problem = EnergyProblem(scene, self.domain)
         self.integrator = Integrator(scene["time"]["integrator"])
         self.minimiser = Minimiser(self.problem, options, settings=scene["solver"])
         self.gather = VertexGather(self.domain, self.problem.V)
+        self._average_mass = None  # of a vertex (kg), for IPC's adaptive stiffness
         self.cell_gather = CellGather(self.domain)
 
     # -- state ----------------------------------------------------------------------------
@@ -178,9 +180,13 @@ class Simulation:
         if p.contact is not None:
             p.contact.stage(h)
         what = f"step {state.step + 1} (t = {state.time + h:.6g} s)"
+        if p.ipc is not None:
+            self._stage_ipc(state.u)
         self._initial_guess(u_pred, state.u, what)
         stats = self.minimiser.solve(p.x_work, what=what)
         p.set_state(p.x_work)
+        if p.ipc is not None:
+            p.ipc.finish_step()
         new = integ.update(h, state, p.u.x.array.copy(), u_pred)
         if integ.name == "newmark":
             # The trapezoidal update v_{n+1} = 2 (u_{n+1} - u_n)/h - v_n would carry a kink
@@ -190,6 +196,28 @@ class Simulation:
             p.prescribe_pin_rates(new.time, new.v, new.a)
         p.v.x.array[:] = new.v
         return new, stats
+
+    def _stage_ipc(self, u: np.ndarray) -> None:
+        """kappa of this step at u_n (:meth:`fem_anim.ipc_contact.IPCContact.stage`)."""
+        p = self.problem
+        p.u.x.array[:] = u
+        p.update_quadrature_data()
+        f = fem_petsc.assemble_vector(p.potential_gradient_form)
+        f.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self._average_mass is None:
+            ones = f.duplicate()
+            ones.set(1.0)
+            M = fem_petsc.assemble_matrix(p.mass_form)
+            M.assemble()
+            Mones = ones.duplicate()
+            M.mult(ones, Mones)  # 1^T M 1 = d m_total over d n_vertices dofs
+            self._average_mass = Mones.sum() / ones.getSize()
+            for obj in (ones, Mones, M):
+                obj.destroy()
+        grad = np.zeros_like(p.u.x.array)
+        grad[: f.array.size] = f.array
+        f.destroy()
+        p.ipc.stage(float(p.weight.value), grad, self._average_mass)
 
     def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> None:
         """Start Newton where the objective is finite: the predictor, else u_n, else the
@@ -207,6 +235,10 @@ class Simulation:
         p = self.problem
         x = p.x_work
         u = compat.petsc_vec(p.u)
+        if p.ipc is not None:  # the predictor only as far as no surface crosses another
+            p.u.x.array[:] = u_last
+            alpha = p.ipc.step_bound(u_last - u_pred)
+            u_pred = u_last + alpha * (u_pred - u_last)
         for guess in (u_pred, u_last):
             p.u.x.array[:] = guess
             fem_petsc.set_bc(u, p.bcs)
@@ -336,7 +368,18 @@ class Simulation:
             "shift": solve.shift, **energies, "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,
             "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,
-            "solve_wall_s": solve.wall_s, "step_wall_s": wall}
+            "solve_wall_s": solve.wall_s, "step_wall_s": wall, **self._contact_stats()}
+
+    def _contact_stats(self) -> dict:
+        """Time in ipctk (detection, barrier, CCD; summed since the last row) and the number
+        of active contact pairs at the end of the step (0 without ``[contact]``)."""
+        ipc = self.problem.ipc
+        if ipc is None:
+            return {"contact_s": 0.0, "contact_pairs": 0}
+        spent = sum(ipc.timers.values())
+        for key in ipc.timers:
+            ipc.timers[key] = 0.0
+        return {"contact_s": spent, "contact_pairs": self.comm.bcast(ipc.num_pairs, root=0)}
 
     def _check_finite(self, state: State, energies: dict[str, float]) -> None:
         """No NaN or inf may reach a frame: stop with a clear message instead."""
