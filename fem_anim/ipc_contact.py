@@ -110,6 +110,8 @@ class IPCContact:
         self.kappa_floor = 0.0
         self.weight = 1.0
         self._distance = np.inf
+        #: IPC's per-pair projection of the Hessian (NONE: the exact Hessian, for tests)
+        self.projection = ipctk.PSDProjectionMethod.CLAMP
         self._x = None
         self.num_pairs = 0
         if self.comm.rank == 0:
@@ -196,8 +198,7 @@ class IPCContact:
         start = time.perf_counter()
         parts = None
         if self.comm.rank == 0:
-            H = self.potential.hessian(self.collisions, self.mesh, x,
-                                       ipctk.PSDProjectionMethod.CLAMP).tocoo()
+            H = self.potential.hessian(self.collisions, self.mesh, x, self.projection).tocoo()
             keep = self.free[H.row] & self.free[H.col]
             g = self.gdim
             to_global = lambda i: self.surface[i // g] * g + i % g  # noqa: E731
