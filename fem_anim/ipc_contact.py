@@ -112,6 +112,7 @@ class IPCContact:
         self._distance = np.inf
         #: IPC's per-pair projection of the Hessian (NONE: the exact Hessian, for tests)
         self.projection = ipctk.PSDProjectionMethod.CLAMP
+        self.friction = None  # the step's lagged friction potential (rank 0), if any
         self._x = None
         self.num_pairs = 0
         if self.comm.rank == 0:
@@ -169,12 +170,15 @@ class IPCContact:
         """kappa (Pa) of the current step."""
         return self.kappa
 
-    def energy(self) -> float:
-        """kappa B(x) (J) at the current ``u``; +inf at contact (collective)."""
+    def energy(self, friction: bool = True) -> float:
+        """kappa B(x) (+ D(x) with friction) (J) at the current ``u``; +inf at contact."""
         x = self._update()
         start = time.perf_counter()
-        value = self.kappa * self.potential(self.collisions, self.mesh, x) \
-            if self.comm.rank == 0 else None
+        value = None
+        if self.comm.rank == 0:
+            value = self.kappa * self.potential(self.collisions, self.mesh, x)
+            if friction and self.friction is not None:
+                value += self.friction(self.tangential, self.mesh, x - self._x_lagged)
         self.timers["barrier_s"] += time.perf_counter() - start
         return self.comm.bcast(value, root=0)
 
@@ -185,7 +189,11 @@ class IPCContact:
         grad = None
         if self.comm.rank == 0:
             grad = (scale * self.kappa) * self.potential.gradient(
-                self.collisions, self.mesh, x).reshape(-1, self.gdim)
+                self.collisions, self.mesh, x)
+            if self.friction is not None:
+                grad += scale * self.friction.gradient(self.tangential, self.mesh,
+                                                       x - self._x_lagged)
+            grad = grad.reshape(-1, self.gdim)
         mine = self._scatter(grad)
         values = b.array.reshape(-1, self.gdim)
         values[self.blocks] += mine
@@ -198,12 +206,17 @@ class IPCContact:
         start = time.perf_counter()
         parts = None
         if self.comm.rank == 0:
-            H = self.potential.hessian(self.collisions, self.mesh, x, self.projection).tocoo()
+            H = self.kappa * self.potential.hessian(self.collisions, self.mesh, x,
+                                                    self.projection)
+            if self.friction is not None:
+                H = H + self.friction.hessian(self.tangential, self.mesh, x - self._x_lagged,
+                                              self.projection)
+            H = H.tocoo()
             keep = self.free[H.row] & self.free[H.col]
             g = self.gdim
             to_global = lambda i: self.surface[i // g] * g + i % g  # noqa: E731
             rows, cols = to_global(H.row[keep]), to_global(H.col[keep])
-            vals = (scale * self.kappa) * H.data[keep]
+            vals = scale * H.data[keep]
             ranges = np.cumsum(self.counts)  # surface vertices per rank, in rank order
             owner = np.searchsorted(ranges, H.row[keep] // g, side="right")
             parts = [(rows[owner == r], cols[owner == r], vals[owner == r])
@@ -241,15 +254,41 @@ class IPCContact:
         return self.comm.bcast(d, root=0)
 
     # -- stiffness schedule -------------------------------------------------------------------
-    def stage(self, weight: float, grad_energy: np.ndarray, average_mass: float) -> None:
-        """Set kappa for a step with integrator weight w, at the current ``u``.
+    def stage(self, weight: float, grad_energy: np.ndarray, average_mass: float,
+              h: float) -> None:
+        """Set kappa (and the lagged friction) for a step of size h with integrator weight
+        w, at the current ``u`` = u_n.
 
         ``grad_energy`` is grad E on the local dofs; IPC's kappa multiplies a barrier
         added to the whole objective, ours sits inside w E, so kappa = kappa_IPC / w.
         """
         self.weight = weight
-        if self.cfg["stiffness"] != "adaptive":
-            return
+        self.friction = None
+        if self.cfg["stiffness"] == "adaptive":
+            self._adapt(weight, grad_energy, average_mass)
+        if self.cfg["friction"] > 0:
+            self._stage_friction(h)
+
+    def _stage_friction(self, h: float) -> None:
+        """IPC's lagged friction (section 5): normal forces and tangent bases at x_n,
+
+        D(x) = sum_k mu lambda_k f0(|T_k^T (x - x_n)|), f0 smoothed over eps_v h,
+
+        with lambda_k the pair's barrier force kappa |dB_k/dd| (area-weighted, in N).
+        """
+        x = self._update()
+        if self.comm.rank == 0:
+            normal = ipctk.BarrierPotential(self.dhat, self.kappa, True)
+            self.tangential = ipctk.TangentialCollisions()
+            self.tangential.build(self.mesh, x, self.collisions, normal,
+                                  float(self.cfg["friction"]))
+            self.friction = ipctk.FrictionPotential(float(self.cfg["epsv"]) * h)
+            self._x_lagged = x.copy()
+        else:
+            self.friction = True  # rank 0 holds the potential; the others only take part
+
+    def _adapt(self, weight: float, grad_energy: np.ndarray, average_mass: float) -> None:
+        """IPC's adaptive kappa at the step start (module docstring)."""
         x = self._update()
         g_energy = self.positions(grad_energy)
         value = None

@@ -534,7 +534,7 @@ class EnergyProblem:
         values.setdefault("gravity", 0.0)
         values.setdefault("contact", 0.0)
         if self.ipc is not None:
-            values["contact"] += self.ipc.energy()
+            values["contact"] += self.ipc.energy(friction=False)  # stored, not dissipated
         values["total_energy"] = values["kinetic"] + values["elastic"] + values["gravity"] + \
             values["contact"]
         return values

@@ -181,7 +181,7 @@ class Simulation:
             p.contact.stage(h)
         what = f"step {state.step + 1} (t = {state.time + h:.6g} s)"
         if p.ipc is not None:
-            self._stage_ipc(state.u)
+            self._stage_ipc(state.u, h)
         self._initial_guess(u_pred, state.u, what)
         stats = self.minimiser.solve(p.x_work, what=what)
         p.set_state(p.x_work)
@@ -197,7 +197,7 @@ class Simulation:
         p.v.x.array[:] = new.v
         return new, stats
 
-    def _stage_ipc(self, u: np.ndarray) -> None:
+    def _stage_ipc(self, u: np.ndarray, h: float) -> None:
         """kappa of this step at u_n (:meth:`fem_anim.ipc_contact.IPCContact.stage`)."""
         p = self.problem
         p.u.x.array[:] = u
@@ -217,7 +217,7 @@ class Simulation:
         grad = np.zeros_like(p.u.x.array)
         grad[: f.array.size] = f.array
         f.destroy()
-        p.ipc.stage(float(p.weight.value), grad, self._average_mass)
+        p.ipc.stage(float(p.weight.value), grad, self._average_mass, h)
 
     def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> None:
         """Start Newton where the objective is finite: the predictor, else u_n, else the
@@ -357,6 +357,7 @@ class Simulation:
     def timed_step(self, state: State, dt: float) -> tuple[State, dict]:
         """One step and its stats row; a non-finite result counts as not converged."""
         start = time.perf_counter()
+        self._contact_stats()  # the contact time of this step only (not of failed tries)
         new, solve = self.step(state, dt)
         energies = self.problem.energies()
         self._check_finite(new, energies)

@@ -191,3 +191,150 @@ def test_contact_run_under_mpi_equals_serial(tmp_path):
                  str(path)], tmp_path, ranks)
         assert r.returncode == 0, r.stderr
     assert_same_run(tmp_path / "n1", tmp_path / "n2")
+
+
+def body_dofs(problem, k: int) -> np.ndarray:
+    """Owned vertex (block) indices of body k."""
+    from dolfinx import fem
+
+    cells = np.flatnonzero(problem.cell_body == k).astype(np.int32)
+    blocks = fem.locate_dofs_topological(problem.V, problem.d, cells)
+    return blocks[blocks < problem.V.dofmap.index_map.size_local]
+
+
+def run_states(sim: Simulation, steps: int, h: float) -> list:
+    state = sim.initial_state()
+    states = [state]
+    for _ in range(steps):
+        state, _ = sim.step(state, h)
+        states.append(state)
+    return states
+
+
+def assert_intersection_free(sim: Simulation, states) -> None:
+    frames = [sim.gather.gather(s.u) for s in states]
+    if sim.comm.rank == 0:
+        u = [f.reshape(-1, sim.problem.d) for f in frames]
+        assert all(intersection_free(sim.domain.points, sim.domain.cells, u))
+
+
+STACK = """
+name = "stack"
+[time]
+dt = 0.04
+steps = 25
+integrator = "implicit_euler"
+[gravity]
+acceleration = [0, 0, -9.81]
+[contact]
+dhat = 0.001
+[[obstacle]]
+type = "plane"
+normal = [0, 0, 1]
+dhat = 0.001
+[[body]]
+name = "bottom"
+offset = [0, 0, 0.002]
+mesh = { shape = "box", size = [0.1, 0.1, 0.1], element_size = 0.05 }
+material = { youngs_modulus = 1e5, density = 500 }
+[[body]]
+name = "top"
+offset = [0.02, 0.02, 0.104]
+mesh = { shape = "box", size = [0.06, 0.06, 0.06], element_size = 0.03 }
+material = { youngs_modulus = 5e4, density = 1000 }
+"""
+
+
+def test_stack_at_rest_carries_the_weights(tmp_path):
+    """A cube resting on another on the ground: once settled, the barrier between them
+    pushes the top cube up with its weight m_top g, and the ground's barrier pushes the
+    pair up with the total weight, each to 1 % (what is left is the last steps' inertia)."""
+    import ufl
+    from dolfinx import fem
+
+    path = tmp_path / "stack.toml"
+    path.write_text(STACK)
+    sim = Simulation(load_scene(path))
+    p = sim.problem
+    states = run_states(sim, 25, 0.04)
+    assert_intersection_free(sim, states)
+    p.u.x.array[:] = states[-1].u
+    g = 9.81
+    masses = [0.5 * 0.1 ** 3 * 1000, 1000 * 0.06 ** 3]  # kg: bottom, top
+    b = p.create_vector()
+    b.set(0.0)
+    p.ipc.add_gradient(b, 1.0)  # kappa grad B: minus the contact forces
+    top = body_dofs(p, 1)
+    lift = -sim.comm.allreduce(b.array.reshape(-1, 3)[top, 2].sum(), op=MPI.SUM)
+    print(f"lift {lift:.6g} N for a weight {masses[1] * g:.6g} N")
+    assert lift == pytest.approx(masses[1] * g, rel=1e-2)
+    v = ufl.TestFunction(p.V)
+    ground = fem.petsc.assemble_vector(fem.form(ufl.derivative(p.contact.energy, p.u, v)))
+    ground.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    reaction = -sim.comm.allreduce(ground.array.reshape(-1, 3)[:, 2].sum(), op=MPI.SUM)
+    print(f"ground {reaction:.6g} N for a weight {sum(masses) * g:.6g} N")
+    assert reaction == pytest.approx(sum(masses) * g, rel=1e-2)
+    assert max(abs(states[-1].v)) < 1e-2  # at rest
+
+
+TILT = """
+name = "tilt"
+[time]
+dt = 0.01
+steps = 20
+integrator = "implicit_euler"
+[gravity]
+acceleration = [0, 0, -9.81]
+[contact]
+dhat = 0.001
+friction = 0.5
+epsv = 1e-3
+[[body]]
+name = "slope"
+rotation = [0, {angle}, 0]
+mesh = {{ shape = "box", size = [0.4, 0.2, 0.05], element_size = 0.05 }}
+material = {{ youngs_modulus = 1e6, density = 1000 }}
+[[body.pin]]
+min = [-1, -1, -1]
+max = [1, 1, 1]
+[[body]]
+name = "block"
+offset = {offset}
+rotation = [0, {angle}, 0]
+mesh = {{ shape = "box", size = [0.05, 0.05, 0.05], element_size = 0.05 }}
+material = {{ youngs_modulus = 1e5, density = 1000 }}
+"""
+
+
+@pytest.mark.parametrize("angle", [15.0, 40.0])
+def test_block_on_a_slope_sticks_below_the_friction_angle(tmp_path, angle):
+    """mu = 0.5 (friction angle 26.6 deg): at 15 deg the block stays (it moves less than
+    3 % of a frictionless slide: the fall onto the slope and IPC's creep below eps_v), at
+    40 deg it slides with a = g (sin - mu cos), measured over its last 0.1 s, to 1 %."""
+    from fem_anim.body import rotation_matrix
+
+    R = rotation_matrix([0, angle, 0], 3)
+    offset = R @ np.array([0.15, 0.075, 0.052])  # 2 mm above the slope
+    path = tmp_path / "tilt.toml"
+    path.write_text(TILT.format(angle=angle, offset=list(offset)))
+    sim = Simulation(load_scene(path))
+    states = run_states(sim, 20, 0.01)
+    assert_intersection_free(sim, states)
+    block = body_dofs(sim.problem, 1)
+    tangent = R @ np.array([1.0, 0, 0])  # down the slope
+    n = sim.comm.allreduce(block.size, op=MPI.SUM)
+
+    def mean(values):  # the block's mean of a vertex field, along the slope
+        return sim.comm.allreduce((values.reshape(-1, 3)[block] @ tangent).sum(), op=MPI.SUM) / n
+
+    slide = mean(states[-1].u)
+    accel = (mean(states[20].v) - mean(states[10].v)) / 0.1  # once it rests on the slope
+    theta = np.radians(angle)
+    coulomb = 9.81 * (np.sin(theta) - 0.5 * np.cos(theta))
+    frictionless = 0.5 * 9.81 * np.sin(theta) * 0.2 ** 2
+    print(f"angle {angle}: slide {slide:.4g} m (frictionless {frictionless:.4g} m), "
+          f"acceleration {accel:.4g} m/s^2 (Coulomb {coulomb:.4g})")
+    if angle < 26.5:  # what moves: the fall onto the slope (0.3 mm) and the eps_v creep
+        assert abs(slide) < 0.03 * frictionless and abs(accel) < 0.01 * 9.81
+    else:
+        assert accel == pytest.approx(coulomb, rel=0.01)
