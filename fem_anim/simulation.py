@@ -219,6 +219,32 @@ class Simulation:
         f.destroy()
         p.ipc.stage(float(p.weight.value), grad, self._average_mass, h)
 
+    def _collision_free_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> None:
+        """With ``[contact]``: u_n + alpha (u_pred - u_n), pins at their targets, with
+        alpha ipctk's collision-free step size, so the start has no intersection (the
+        barrier is finite on crossed surfaces: the objective cannot reject them).
+
+        Moving pins go only as far as alpha too: Newton's pinned rows x - u_bc then bring
+        them to their targets, each step capped by the CCD, so a pin never pushes one
+        surface through another; if it cannot get there the step fails and is retried
+        smaller (:class:`AdaptiveStepper`).
+        """
+        p = self.problem
+        u = compat.petsc_vec(p.u)
+        p.u.x.array[:] = u_pred
+        fem_petsc.set_bc(u, p.bcs)
+        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        target = p.u.x.array.copy()
+        p.u.x.array[:] = u_last
+        alpha = p.ipc.step_bound(u_last - target)
+        for guess in (u_last + alpha * (target - u_last), u_last):
+            p.u.x.array[:] = guess
+            u.copy(p.x_work)
+            if math.isfinite(p.objective(None, p.x_work)):
+                return
+        raise ConvergenceError(f"{what}: no collision-free start with every element "
+                               "uninverted: reduce time.dt")
+
     def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> None:
         """Start Newton where the objective is finite: the predictor, else u_n, else the
         linearised response to the pins' motion.
@@ -235,10 +261,9 @@ class Simulation:
         p = self.problem
         x = p.x_work
         u = compat.petsc_vec(p.u)
-        if p.ipc is not None:  # the predictor only as far as no surface crosses another
-            p.u.x.array[:] = u_last
-            alpha = p.ipc.step_bound(u_last - u_pred)
-            u_pred = u_last + alpha * (u_pred - u_last)
+        if p.ipc is not None:
+            self._collision_free_guess(u_pred, u_last, what)
+            return
         for guess in (u_pred, u_last):
             p.u.x.array[:] = guess
             fem_petsc.set_bc(u, p.bcs)

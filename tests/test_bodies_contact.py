@@ -248,7 +248,7 @@ material = { youngs_modulus = 5e4, density = 1000 }
 def test_stack_at_rest_carries_the_weights(tmp_path):
     """A cube resting on another on the ground: once settled, the barrier between them
     pushes the top cube up with its weight m_top g, and the ground's barrier pushes the
-    pair up with the total weight, each to 1 % (what is left is the last steps' inertia)."""
+    pair up with the total weight, each to 0.1 % (what is left is the last steps' inertia)."""
     import ufl
     from dolfinx import fem
 
@@ -267,13 +267,13 @@ def test_stack_at_rest_carries_the_weights(tmp_path):
     top = body_dofs(p, 1)
     lift = -sim.comm.allreduce(b.array.reshape(-1, 3)[top, 2].sum(), op=MPI.SUM)
     print(f"lift {lift:.6g} N for a weight {masses[1] * g:.6g} N")
-    assert lift == pytest.approx(masses[1] * g, rel=1e-2)
+    assert lift == pytest.approx(masses[1] * g, rel=1e-3)
     v = ufl.TestFunction(p.V)
     ground = fem.petsc.assemble_vector(fem.form(ufl.derivative(p.contact.energy, p.u, v)))
     ground.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
     reaction = -sim.comm.allreduce(ground.array.reshape(-1, 3)[:, 2].sum(), op=MPI.SUM)
     print(f"ground {reaction:.6g} N for a weight {sum(masses) * g:.6g} N")
-    assert reaction == pytest.approx(sum(masses) * g, rel=1e-2)
+    assert reaction == pytest.approx(sum(masses) * g, rel=1e-3)
     assert max(abs(states[-1].v)) < 1e-2  # at rest
 
 
@@ -338,3 +338,64 @@ def test_block_on_a_slope_sticks_below_the_friction_angle(tmp_path, angle):
         assert abs(slide) < 0.03 * frictionless and abs(accel) < 0.01 * 9.81
     else:
         assert accel == pytest.approx(coulomb, rel=0.01)
+
+
+FOLD = """
+name = "fold"
+[time]
+dt = 0.02
+steps = 40
+integrator = "implicit_euler"
+[gravity]
+acceleration = [0, 0, -9.81]
+[material]
+youngs_modulus = 2e4
+density = 1000
+[mesh]
+shape = "box"
+origin = [0, 0, 0.002]
+size = [0.6, 0.04, 0.04]
+element_size = 0.02
+[contact]
+dhat = 0.001
+[[obstacle]]
+type = "plane"
+normal = [0, 0, 1]
+[[pin]]
+name = "left"
+min = [-0.01, -1, -1]
+max = [0.35, 1, 1]
+[[pin]]
+name = "right"
+min = [0.57, -1, -1]
+max = [0.61, 1, 1]
+angular_velocity = -6.283185307179586
+axis = [0, 1, 0]
+center = [0.45, 0.02, 0.04225]
+until = 0.5
+"""
+
+
+def test_bar_folded_into_a_u_touches_itself_and_never_crosses(tmp_path):
+    """One soft bar on the ground (a single body: self contact), its left half held, its
+    right end turned half a turn up and over about a point just above the top face, so
+    that it comes down 0.5 mm (< dhat) above the held half and the fold presses on it by
+    gravity. Pairs appear only once the arms meet (none while the bar bends), and no frame
+    read back from disk has an intersection. (Turned the other way the pins would drive
+    the end through the ground: that run stops with a convergence error instead.)"""
+    import csv
+
+    path = tmp_path / "fold.toml"
+    path.write_text(FOLD)
+    out = tmp_path / "out"
+    assert main(["run", "-q", "-o", str(out), "--set", "output.render=false", str(path)]) == 0
+    rows = list(csv.DictReader(open(out / "stats.csv")))
+    pairs = [int(r["contact_pairs"]) for r in rows]
+    assert pairs[0] == 0 and min(pairs[-5:]) > 20
+    with meshio.xdmf.TimeSeriesReader(str(out / "trajectory.xdmf")) as reader:
+        points, cells = reader.read_points_cells()
+        frames = [reader.read_data(k)[1]["displacement"] for k in range(reader.num_steps)]
+    tets = next(c.data for c in cells if c.type == "tetra")
+    assert len(frames) == 41 and all(intersection_free(points, tets, frames))
+    tip = points[:, 0] > 0.59  # the right end came over onto the held half
+    assert np.all(points[tip, 0] + frames[-1][tip, 0] < 0.35)
