@@ -163,8 +163,9 @@ def _check_string(path: str, value: str) -> None:
         raise SceneError(f"{path} must not contain control characters, got {_show(value)}")
 
 
-#: What ``render.color_by`` may name: vertex |displacement| or the cells' mean psi.
-COLOR_FIELDS = ("displacement", "energy_density")
+#: What ``render.color_by`` may name: vertex |displacement|, the cells' mean psi, or one
+#: colour per body (the mesh's connected parts: the ``[[body]]`` tables in order).
+COLOR_FIELDS = ("displacement", "energy_density", "body")
 #: Named camera views (``auto``: ``side`` in 3D, ``xy`` in 2D; see fem_anim/render.py).
 VIEWS = ("auto", "side", "iso", "xy", "xz", "yz")
 #: What ``render.outputs`` may list: PNG frames, an animated GIF, an MP4 video.
