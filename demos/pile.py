@@ -87,10 +87,11 @@ if MPI.COMM_WORLD.rank == 0:
     kinetic = np.array([r["kinetic"] for r in rows])
     released = rows[0]["gravity"] - min(r["gravity"] for r in rows)
     share = sum(r["contact_s"] for r in rows) / sum(r["step_wall_s"] for r in rows)
+    newton = [r["newton_its"] for r in rows]
     print(f"{len(frames)} frames, crossed: {crossed}; lowest vertex {lowest:.2e} m; pairs at "
           f"the end {pairs[-1]} (max {max(pairs)}); kinetic {kinetic[-1]:.3g} J of "
-          f"{released:.3g} J released; Newton its median {np.median([r['newton_its'] for r in rows]):.0f}, "
-          f"max {max(r['newton_its'] for r in rows)}; ipctk {100 * share:.0f} % of the step time")
+          f"{released:.3g} J released; Newton its median {np.median(newton):.0f}, max "
+          f"{max(newton)}; ipctk {100 * share:.0f} % of the step time")
     assert not crossed, f"frames {crossed} have intersecting surfaces"
     assert lowest > 0.0, "a vertex reached the ground"
     assert max(pairs) > 0, "the bodies never touched"

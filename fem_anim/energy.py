@@ -19,6 +19,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from .body import body_pins
+
 __all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
            "DAMPED_THRESHOLD"]
 
@@ -54,7 +56,8 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
     potential0 = initial["elastic"] + initial["gravity"]
     exchanged = max([abs(e0)] + [r["kinetic"] for r in rows]
                     + [potential0 - r["elastic"] - r["gravity"] for r in rows])
-    moving = any(p["velocity"] is not None or p["angular_velocity"] != 0 for p in scene["pin"])
+    moving = any(p["velocity"] is not None or p["angular_velocity"] != 0
+                 for _, _, p in body_pins(scene))
     conservative = "damping" not in scene.data and not moving
     e_end = rows[-1]["total_energy"] if rows else e0
     if exchanged > 0.0:

@@ -165,11 +165,6 @@ class IPCContact:
         return x
 
     # -- energy, gradient, Hessian -------------------------------------------------------------
-    @property
-    def stiffness(self) -> float:
-        """kappa (Pa) of the current step."""
-        return self.kappa
-
     def energy(self, friction: bool = True) -> float:
         """kappa B(x) (+ D(x) with friction) (J) at the current ``u``; +inf at contact."""
         x = self._update()
@@ -244,15 +239,6 @@ class IPCContact:
         self.timers["ccd_s"] += time.perf_counter() - start
         return self.comm.bcast(alpha, root=0)
 
-    def min_distance(self) -> float:
-        """Smallest distance between non-adjacent surface elements (inf if none is near)."""
-        x = self._update()
-        d = None
-        if self.comm.rank == 0:
-            d = float(self.collisions.compute_minimum_distance(self.mesh, x)) \
-                if self.num_pairs else np.inf
-        return self.comm.bcast(d, root=0)
-
     # -- stiffness schedule -------------------------------------------------------------------
     def stage(self, weight: float, grad_energy: np.ndarray, average_mass: float,
               h: float) -> None:
@@ -300,11 +286,12 @@ class IPCContact:
                 weight * g_energy.ravel(), g_barrier)
             value = max(kappa, self.kappa_floor)
             self.kappa_floor = value
-            self._distance = self.min_distance_local(x)
+            self._distance = self._min_distance(x)
         self.kappa_ipc = self.comm.bcast(value, root=0)
         self.kappa = self.kappa_ipc / weight
 
-    def min_distance_local(self, x: np.ndarray) -> float:
+    def _min_distance(self, x: np.ndarray) -> float:
+        """Rank 0: the smallest distance of the pairs nearer than d_hat (inf if none)."""
         return float(self.collisions.compute_minimum_distance(self.mesh, x)) \
             if self.num_pairs else np.inf
 
@@ -313,7 +300,7 @@ class IPCContact:
         x = self._update()
         if self.cfg["stiffness"] != "adaptive" or self.comm.rank != 0:
             return
-        d = self.min_distance_local(x)
+        d = self._min_distance(x)
         if np.isfinite(d) and np.isfinite(self._distance):
             self.kappa_floor = ipctk.update_barrier_stiffness(
                 self._distance, d, self.kappa_max, self.kappa_floor, self.diagonal)

@@ -18,7 +18,6 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem_anim import compat
 from fem_anim.cli import main
 from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
