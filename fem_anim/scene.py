@@ -279,7 +279,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "epsv": Key(NUM, 1.0e-3, _positive),
     },
     "body": {  # one of several bodies (fem_anim/body.py); sub-tables as at the top level
-        "name": Key(str, None, _scene_name),
+        "name": Key(str, None, lambda v: None if NAME_PATTERN.fullmatch(v) else
+                    "must be a simple name (letters, digits, '_', '-', '.'; at most 100 "
+                    "characters)"),
         "offset": Key(list, None, None, (2, 3)),
         "rotation": Key(list, None, None, (1, 3)),
     },
@@ -525,6 +527,10 @@ def _validate_bodies(raw: Mapping[str, Any]) -> list[dict[str, Any]]:
         where = f"body[{i}]"
         if not isinstance(entry, dict):
             raise SceneError(f"{where} must be a table, got {_show(entry)}")
+        for k in entry:
+            if k not in SCHEMA["body"] and k not in BODY_TABLES + BODY_ARRAYS:
+                known = ", ".join([*SCHEMA["body"], *BODY_TABLES, *BODY_ARRAYS])
+                raise SceneError(f"unknown key {where}.{_key(k)} (known: {known})")
         own = {k: v for k, v in entry.items() if k not in BODY_TABLES + BODY_ARRAYS}
         body = _validate_table("body", own, SCHEMA["body"], where)
         for section in BODY_TABLES:
