@@ -398,3 +398,21 @@ def test_bar_folded_into_a_u_touches_itself_and_never_crosses(tmp_path):
     assert len(frames) == 41 and all(intersection_free(points, tets, frames))
     tip = points[:, 0] > 0.59  # the right end came over onto the held half
     assert np.all(points[tip, 0] + frames[-1][tip, 0] < 0.35)
+
+
+def test_render_gives_each_body_its_colour_and_draws_the_ground(tmp_path):
+    """``render.color_by = "body"``: the two cubes come out in the palette's first two
+    colours (blue, orange), and the ground plane is drawn grey below them."""
+    import imageio.v3 as iio
+
+    text = TWO_CUBES + ('[render]\ncolor_by = "body"\noutputs = []\nshow_edges = false\n'
+                        '[[obstacle]]\ntype = "plane"\nnormal = [0, 0, 1]\n'
+                        'point = [0, 0, -0.05]\n')
+    out = tmp_path / "out"
+    assert main(["run", "-q", "-o", str(out), str(scene_file(tmp_path, 2, text))]) == 0
+    image = iio.imread(out / "final.png").astype(int)
+    r, g, b = image[..., 0], image[..., 1], image[..., 2]
+    blue = np.count_nonzero((b > r + 60) & (b > g + 20))
+    orange = np.count_nonzero((r > b + 100) & (r > g + 40))
+    grey = np.count_nonzero((abs(r - g) < 8) & (abs(g - b) < 8) & (r > 120) & (r < 230))
+    assert blue > 2000 and orange > 2000 and grey > 20000, (blue, orange, grey)
