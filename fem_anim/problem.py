@@ -12,8 +12,11 @@ Only terms the scene declares are built: without ``[gravity]`` there is no gravi
 form, without ``[[obstacle]]`` no contact form (:mod:`fem_anim.contact`); with ``[[region]]``
 entries (:mod:`fem_anim.region`) the elastic energy is one integral per material model in
 use over its cells, and mu, lambda and rho are piecewise-constant fields instead of
-constants. The energies reported per step (kinetic, elastic, gravity, contact) are separate
-scalar forms over the same measures.
+constants. With ``[contact]`` the IPC Toolkit's barrier between surfaces
+(:mod:`fem_anim.ipc_contact`) is added to g, its gradient and its Hessian outside UFL (times
+w, like every term of E); with ``[[body]]`` the bodies' materials are regions and their pins
+hold their own vertices (:mod:`fem_anim.body`). The energies reported per step (kinetic,
+elastic, gravity, contact) are separate scalar forms over the same measures.
 
 The unknown is the displacement u = x - X (x deformed, X rest positions); pinned dofs
 are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins).

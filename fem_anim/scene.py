@@ -10,7 +10,10 @@ Sections describing the body and the run (``mesh``, ``element``, ``material``,
 terms (``gravity``, ``pin``, ``obstacle``) exist only when the scene declares them.
 ``[[region]]`` entries override the body's ``[material]`` on parts of the mesh
 (:mod:`fem_anim.region`); ``[initial]`` gives the body a rigid initial velocity
-(:mod:`fem_anim.initial`). Rules between keys (lengths match ``mesh.dim``, boxes are not
+(:mod:`fem_anim.initial`). ``[[body]]`` tables describe several bodies, each with its
+own ``mesh``, ``material``, ``initial``, ``[[body.pin]]`` and ``[[body.region]]``
+(:mod:`fem_anim.body`); ``[contact]`` makes surfaces repel each other
+(:mod:`fem_anim.ipc_contact`). Rules between keys (lengths match ``mesh.dim``, boxes are not
 empty, settings are compatible) are checked after each key's own, in
 :mod:`fem_anim.scene_consistency`.
 """
