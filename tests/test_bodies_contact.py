@@ -416,3 +416,18 @@ def test_render_gives_each_body_its_colour_and_draws_the_ground(tmp_path):
     orange = np.count_nonzero((r > b + 100) & (r > g + 40))
     grey = np.count_nonzero((abs(r - g) < 8) & (abs(g - b) < 8) & (r > 120) & (r < 230))
     assert blue > 2000 and orange > 2000 and grey > 20000, (blue, orange, grey)
+
+
+@pytest.mark.slow
+def test_without_self_contact_the_folded_bar_has_no_pairs(tmp_path):
+    """``contact.self = false`` keeps only pairs between different bodies: the fold that
+    makes 48 pairs with self contact makes none (one body)."""
+    import csv
+
+    path = tmp_path / "fold.toml"
+    path.write_text(FOLD)
+    out = tmp_path / "out"
+    assert main(["run", "-q", "-o", str(out), "--set", "output.render=false",
+                 "--set", "contact.self=false", str(path)]) == 0
+    rows = list(csv.DictReader(open(out / "stats.csv")))
+    assert all(int(r["contact_pairs"]) == 0 for r in rows)
