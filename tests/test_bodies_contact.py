@@ -436,3 +436,24 @@ def test_without_self_contact_the_folded_bar_has_no_pairs(tmp_path):
                  "--set", "contact.self=false", str(path)]) == 0
     rows = list(csv.DictReader(open(out / "stats.csv")))
     assert all(int(r["contact_pairs"]) == 0 for r in rows)
+
+
+def test_body_materials_and_regions_act_on_their_own_cells(tmp_path):
+    """Each body's material is its cells'; a [[body.region]] box covering both bodies
+    changes only its own body's cells (those whose centroid lies in it)."""
+    from dolfinx import mesh as dmesh
+
+    text = TWO_CUBES.replace('initial = {{ velocity = [-1.0, 0, 0] }}\n',
+                             'initial = {{ velocity = [-1.0, 0, 0] }}\n[[body.region]]\n'
+                             'name = "soft"\nmin = [-1, -1, -1]\nmax = [1, 1, 0.05]\n'
+                             'youngs_modulus = 1e3\n')
+    sim = Simulation(load_scene(scene_file(tmp_path, 1, text)))
+    p = sim.problem
+    n = p.cell_body.size
+    z = dmesh.compute_midpoints(sim.domain.mesh, 3, np.arange(n, dtype=np.int32))[:, 2]
+    E = p.material_map.cell_values("youngs_modulus")
+    low = z <= 0.05
+    assert np.all(E[p.cell_body == 0] == 1e5)  # the box covers body 0 too: not its region
+    assert np.all(E[(p.cell_body == 1) & low] == 1e3)
+    assert np.all(E[(p.cell_body == 1) & ~low] == 2e5)
+    assert np.any((p.cell_body == 1) & low) and np.any((p.cell_body == 1) & ~low)
