@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FemAnimError
-from .frame_renderer import FrameRenderer
+from .frame_renderer import FrameRenderer, body_labels
 from .rundir import install, read_manifest
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
@@ -109,13 +109,16 @@ def read_run(path: Path) -> RunFrames:
 
 
 def frame_values(run: RunFrames, field: str) -> np.ndarray:
-    """The colour field per frame: |u| per vertex (k, n), or psi per cell (k, m).
+    """The colour field per frame: |u| per vertex (k, n), psi per cell (k, m), or the body
+    number per cell (k, m).
 
     Raises:
         FemAnimError: if the run has no energy density (written by an older fem-anim).
     """
     if field == "displacement":
         return np.linalg.norm(run.displacement, axis=2)
+    if field == "body":
+        return np.broadcast_to(body_labels(run.cells), (run.times.size, run.cells.shape[0]))
     if run.energy_density is None:
         raise FemAnimError('render.color_by = "energy_density": this run\'s trajectory has no '
                            "energy_density field; run the scene again")
@@ -160,7 +163,7 @@ def render_directory(path: Path, settings: dict) -> dict:
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir()
     try:
-        made = _render_frames(run, settings, staging, _run_name(path))
+        made = _render_frames(run, settings, staging, _run_name(path), _obstacles(path))
         write_plots(path / "stats.csv", staging)
         _move_into_place(staging, path)
     finally:
@@ -178,7 +181,18 @@ def _bounds(run: RunFrames) -> np.ndarray:
     return np.concatenate([bounds, np.zeros(6 - bounds.size)])
 
 
-def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str) -> dict:
+def _obstacles(path: Path) -> list[dict]:
+    """The run's ``[[obstacle]]`` tables (from ``scene.json``; none if it cannot be read)."""
+    import json
+
+    try:
+        return list(json.loads((path / "scene.json").read_text())["scene"]["obstacle"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+
+
+def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
+                   obstacles: list[dict] = ()) -> dict:
     """Frames, GIF, MP4 and final.png into ``staging``, one renderer for all frames."""
     import imageio.v3 as iio
     import imageio_ffmpeg
@@ -193,7 +207,7 @@ def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str) -> 
     width = max(4, len(str(last)))
     if "frames" in outputs:
         (staging / "frames").mkdir()
-    renderer = FrameRenderer(run.points, run.cells, settings, clim, _bounds(run))
+    renderer = FrameRenderer(run.points, run.cells, settings, clim, _bounds(run), obstacles)
     video, gif = None, []
     start = time.perf_counter()
     try:

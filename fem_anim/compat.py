@@ -62,6 +62,7 @@ __all__ = [
     "set_schur_user_matrix",
     "quadrature_space",
     "petsc_vec",
+    "cell_dofs",
     "geometry_dofmap",
     "cell_dofs",
     "create_mesh",
@@ -153,6 +154,13 @@ def quadrature_space(mesh, degree: int, shape: tuple[int, ...] = ()) -> fem.Func
 def petsc_vec(u: fem.Function):
     """The PETSc vector that holds a Function's degrees of freedom."""
     return u.vector if LEGACY else u.x.petsc_vec
+
+
+def cell_dofs(V) -> np.ndarray:
+    """Cell -> dof (block) indices of a function space as a (num_cells, dofs_per_cell) array
+    (0.9: ``V.dofmap.list`` is that array already)."""
+    dofs = V.dofmap.list.array
+    return dofs.reshape(-1, V.dofmap.dof_layout.num_dofs)
 
 
 def geometry_dofmap(mesh) -> np.ndarray:

@@ -44,6 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .body import body_pins
+
 __all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
            "DAMPED_THRESHOLD", "ROUNDOFF_STRAIN", "moving_pins"]
 
@@ -65,7 +67,8 @@ NEWMARK_CONTACT = ("newmark's trapezoidal rule v_{n+1} = v_n + h/2 (a_n + a_{n+1
 
 def moving_pins(scene) -> bool:
     """Whether any pin of ``scene`` moves (a handle): it then works on the body."""
-    return any(p["velocity"] is not None or p["angular_velocity"] != 0 for p in scene["pin"])
+    return any(p["velocity"] is not None or p["angular_velocity"] != 0
+               for _, _, p in body_pins(scene))
 
 
 def _volume(domain) -> float:
@@ -121,7 +124,8 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
     potential0 = initial["elastic"] + initial["gravity"]
     exchanged = max([abs(e0)] + [r["kinetic"] for r in rows]
                     + [potential0 - r["elastic"] - r["gravity"] for r in rows])
-    friction = any(ob["friction"] > 0 for ob in scene["obstacle"])
+    friction = any(ob["friction"] > 0 for ob in scene["obstacle"]) or \
+        ("contact" in scene.data and scene["contact"]["friction"] > 0)
     moving = moving_pins(scene)
     conservative = "damping" not in scene.data and not friction and not moving
     e_end = rows[-1]["total_energy"] if rows else e0
@@ -140,6 +144,11 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
                                   if r.get("snes_reason") == POLISH_FAILED_REASON]}
 
 
+def _contact(scene) -> bool:
+    """Whether the scene has contact: obstacles, or contact between bodies."""
+    return bool(scene["obstacle"]) or "contact" in scene.data
+
+
 def describe_energy(report: dict, scene) -> str:
     """One line for the terminal: the drift, and a warning for a gain or a loss that the
     scene does not explain, with advice only where it applies."""
@@ -156,12 +165,12 @@ def describe_energy(report: dict, scene) -> str:
             f"{100.0 * report['max_excursion']:.3g} %{unmet}")
     if report["damped"]:
         # newmark gains energy at impacts (NEWMARK_CONTACT): not advised for contact
-        advice = "a smaller time.dt" if integrator == "newmark" or scene["obstacle"] else \
+        advice = "a smaller time.dt" if integrator == "newmark" or _contact(scene) else \
             "newmark or a smaller time.dt"
         return (base + f"; numerical damping: {integrator} with this time step damped away "
                 f"{-pct:.3g} % of the energy (use {advice} to keep the motion)")
     if report["gained"]:
-        if scene["obstacle"] and integrator == "newmark":
+        if _contact(scene) and integrator == "newmark":
             why = NEWMARK_CONTACT + (" (lagged friction adds to it)"
                                      if report["friction_newmark"] else "")
         else:

@@ -17,8 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["FrameRenderer", "VIEWS", "FIELD_LABELS", "DEFAULT_SETTINGS", "render_frame",
-           "render_vtu"]
+from .connectivity import cell_components
+
+__all__ = ["FrameRenderer", "VIEWS", "FIELD_LABELS", "DEFAULT_SETTINGS", "body_labels",
+           "render_frame", "render_vtu"]
 
 #: Named views: direction from the focal point to the camera, and the up vector.
 VIEWS = {
@@ -29,7 +31,10 @@ VIEWS = {
     "yz": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
 }
 #: Scalar bar titles of the fields ``render.color_by`` names.
-FIELD_LABELS = {"displacement": "displacement (m)", "energy_density": "psi (J/m^3)"}
+FIELD_LABELS = {"displacement": "displacement (m)", "energy_density": "psi (J/m^3)",
+                "body": "body"}
+#: Colours of the bodies (``color_by = "body"``), in order, repeated past ten.
+BODY_COLORMAP = "tab10"
 #: Narrower pictures have no scalar bar (its labels would cover the body).
 MIN_SCALAR_BAR_WIDTH = 240
 #: The ``[render]`` table's defaults (see fem_anim/scene.py), for a bare ``render_frame``.
@@ -61,10 +66,12 @@ class FrameRenderer:
         clim: Fixed colour range (lo, hi) of the field.
         bounds: Box (xmin, xmax, ymin, ymax, zmin, zmax) the camera frames: the union of
             all frames' deformed positions, so the view does not jump.
+        obstacles: The scene's ``[[obstacle]]`` tables, drawn grey (a plane as a square
+            around the bodies' footprint, a sphere as itself).
     """
 
     def __init__(self, points: np.ndarray, cells: np.ndarray, settings: dict,
-                 clim: tuple[float, float], bounds: np.ndarray):
+                 clim: tuple[float, float], bounds: np.ndarray, obstacles=()):
         import matplotlib.colors
 
         pv = _pyvista()
@@ -88,9 +95,14 @@ class FrameRenderer:
         plotter.disable_anti_aliasing()  # MSAA triples the cost of a software-rendered frame
         plotter.set_background(background)
         lo, hi = clim
-        plotter.add_mesh(self.grid, scalars=label, cmap=settings["colormap"],
+        bodies = self.field == "body"
+        if bodies:  # categorical: body k takes colour k of the palette
+            lo, hi = -0.5, 9.5
+        plotter.add_mesh(self.grid, scalars=label,
+                         cmap=BODY_COLORMAP if bodies else settings["colormap"],
+                         n_colors=10 if bodies else 256,
                          clim=(lo, hi if hi > lo else lo + 1.0),
-                         show_scalar_bar=width >= MIN_SCALAR_BAR_WIDTH,
+                         show_scalar_bar=width >= MIN_SCALAR_BAR_WIDTH and not bodies,
                          show_edges=settings["show_edges"],
                          edge_color="#404040" if ink == "black" else "#a0a0a0",
                          scalar_bar_args={"title": label, "color": ink, "vertical": False,
@@ -100,6 +112,9 @@ class FrameRenderer:
         rest = pv.UnstructuredGrid(topology, types, X)
         plotter.add_mesh(rest, style="wireframe", color="grey", opacity=0.25)
         self.text = plotter.add_text("", position="upper_left", font_size=8, color=ink)
+        for obstacle in obstacles:
+            plotter.add_mesh(_obstacle_mesh(pv, obstacle, np.asarray(bounds, float)),
+                             color="#b0b0b0", opacity=0.6)
         self._place_camera(settings, np.asarray(bounds, float))
 
     def _place_camera(self, settings: dict, bounds: np.ndarray) -> None:
@@ -134,6 +149,28 @@ class FrameRenderer:
         self.plotter.close()
 
 
+def body_labels(cells: np.ndarray) -> np.ndarray:
+    """The connected part of the mesh each cell belongs to, numbered by first cell: the
+    bodies of a ``[[body]]`` scene in their order (their cells are concatenated)."""
+    return cell_components(cells, int(cells.max()) + 1).astype(float)
+
+
+def _obstacle_mesh(pv, obstacle: dict, bounds: np.ndarray):
+    """A pyvista surface of an obstacle: a plane as a square twice the bodies' size about
+    their centre's projection onto it, a sphere as itself."""
+    center = 0.5 * (bounds[0::2] + bounds[1::2])
+    if obstacle["type"] == "sphere":
+        return pv.Sphere(radius=obstacle["radius"], center=_pad3(
+            np.asarray([obstacle["center"]], float))[0], theta_resolution=48,
+            phi_resolution=24)
+    normal = _pad3(np.asarray([obstacle["normal"]], float))[0]
+    normal /= np.linalg.norm(normal)
+    point = _pad3(np.asarray([obstacle["point"] or [0.0] * len(obstacle["normal"])], float))[0]
+    size = 2.0 * float(np.max(bounds[1::2] - bounds[0::2]))
+    foot = center - np.dot(center - point, normal) * normal
+    return pv.Plane(center=foot, direction=normal, i_size=size, j_size=size)
+
+
 def render_frame(path: Path, points: np.ndarray, cells: np.ndarray, displacement: np.ndarray,
                  energy_density: np.ndarray | None = None, title: str = "",
                  settings: dict | None = None) -> None:
@@ -153,8 +190,9 @@ def render_frame(path: Path, points: np.ndarray, cells: np.ndarray, displacement
     settings = DEFAULT_SETTINGS | (settings or {})
     if settings["color_by"] == "energy_density" and energy_density is None:
         settings = settings | {"color_by": "displacement"}  # a file from an older run
-    values = np.linalg.norm(displacement, axis=1) if settings["color_by"] == "displacement" \
-        else energy_density
+    values = {"displacement": lambda: np.linalg.norm(displacement, axis=1),
+              "energy_density": lambda: energy_density,
+              "body": lambda: body_labels(cells)}[settings["color_by"]]()
     x = _pad3(points[:, : points.shape[1]] + displacement[:, : points.shape[1]])
     x = np.vstack([x, _pad3(points)])
     bounds = np.ravel(np.column_stack([x.min(axis=0), x.max(axis=0)]))

@@ -20,16 +20,24 @@ import numpy as np
 import ufl
 from dolfinx import fem
 
+from . import compat
+
 __all__ = ["center_of_mass", "initial_velocity", "rigid_velocity"]
 
 
-def center_of_mass(problem) -> np.ndarray:
-    """c = int rho X dV / int rho dV over the whole body (collective)."""
+def center_of_mass(problem, body: int | None = None) -> np.ndarray:
+    """c = int rho X dV / int rho dV over the whole mesh, or one body's cells (collective)."""
     mesh = problem.domain.mesh
     X = ufl.SpatialCoordinate(mesh)
     dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": 2})
-    mass = problem.assemble_scalar(fem.form(problem.rho * dx))
-    moments = [problem.assemble_scalar(fem.form(problem.rho * X[i] * dx))
+    rho = problem.rho
+    if body is not None:  # rho on the body's cells, 0 elsewhere
+        indicator = fem.Function(problem.W0)
+        cells = np.flatnonzero(problem.cell_body == body)
+        indicator.x.array[compat.cell_dofs(problem.W0)[cells, 0]] = 1.0
+        rho = rho * indicator
+    mass = problem.assemble_scalar(fem.form(rho * dx))
+    moments = [problem.assemble_scalar(fem.form(rho * X[i] * dx))
                for i in range(problem.d)]
     return np.asarray(moments) / mass
 
@@ -47,19 +55,30 @@ def rigid_velocity(X: np.ndarray, velocity, omega, center) -> np.ndarray:
 
 
 def initial_velocity(scene, problem) -> np.ndarray | None:
-    """v_0 on the local dofs (owned and ghost) from ``[initial]``, or None without it.
+    """v_0 on the local dofs (owned and ghost) from ``[initial]`` (or each ``[[body]]``'s
+    ``initial``, about its own centre of mass), or None without any.
 
-    Collective when the centre of mass has to be computed.
+    Collective when a centre of mass has to be computed.
     """
-    cfg = scene.get("initial")
-    if cfg is None:
+    bodies = scene.get("body") or []
+    entries = [(None, scene.get("initial"))] if not bodies else \
+        [(k, b.get("initial")) for k, b in enumerate(bodies)]
+    if all(cfg is None for _, cfg in entries):
         return None
-    center = cfg["center"]
-    if center is None:
-        center = center_of_mass(problem) if cfg["angular_velocity"] is not None else \
-            np.zeros(problem.d)
     X = problem.V.tabulate_dof_coordinates()[:, : problem.d]
-    v = rigid_velocity(X, cfg["velocity"], cfg["angular_velocity"], center)
+    v = np.zeros_like(X)
+    for body, cfg in entries:
+        if cfg is None:
+            continue
+        center = cfg["center"]
+        if center is None:
+            center = center_of_mass(problem, body) if cfg["angular_velocity"] is not None \
+                else np.zeros(problem.d)
+        dofs = slice(None)
+        if body is not None:
+            cells = np.flatnonzero(problem.cell_body == body).astype(np.int32)
+            dofs = fem.locate_dofs_topological(problem.V, problem.d, cells)
+        v[dofs] = rigid_velocity(X[dofs], cfg["velocity"], cfg["angular_velocity"], center)
     for bc in problem.displacement_bcs:
         v.reshape(-1)[bc.dof_indices()[0]] = 0.0
     return v.reshape(-1)

@@ -36,7 +36,8 @@ __all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "Traject
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "initial_residual_norm", "newton_decrement", "shift", "kinetic",
                  "elastic", "gravity", "contact", "total_energy", "assembly_s", "factor_s",
-                 "linear_solve_s", "other_s", "solve_wall_s", "step_wall_s"]
+                 "linear_solve_s", "other_s", "solve_wall_s", "step_wall_s", "contact_s",
+                 "contact_pairs"]
 
 
 class VertexGather:

@@ -12,8 +12,11 @@ Only terms the scene declares are built: without ``[gravity]`` there is no gravi
 form, without ``[[obstacle]]`` no contact form (:mod:`fem_anim.contact`); with ``[[region]]``
 entries (:mod:`fem_anim.region`) the elastic energy is one integral per material model in
 use over its cells, and mu, lambda and rho are piecewise-constant fields instead of
-constants. The energies reported per step (kinetic, elastic, gravity, contact) are separate
-scalar forms over the same measures.
+constants. With ``[contact]`` the IPC Toolkit's barrier between surfaces
+(:mod:`fem_anim.ipc_contact`) is added to g, its gradient and its Hessian outside UFL (times
+w, like every term of E); with ``[[body]]`` the bodies' materials are regions and their pins
+hold their own vertices (:mod:`fem_anim.body`). The energies reported per step (kinetic,
+elastic, gravity, contact) are separate scalar forms over the same measures.
 
 The unknown is the displacement u = x - X (x deformed, X rest positions); pinned dofs
 are Dirichlet conditions whose values live in :attr:`u_bc` (zero for fixed pins).
@@ -53,14 +56,16 @@ from fem_anim.forms.material import EXTRA_DATA, get_material
 from fem_anim.forms.mixed import MIXED_MATERIALS, compliance, lagrangian
 
 from . import compat
+from .body import body_pins, body_regions
 from .contact import ObstacleContact
+from .ipc_contact import IPCContact
 from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh, cell_volumes
 from .mixed import MixedFields, SchurPreconditioner
 from .pin import PinMotion
 from .quadrature import QuadratureData
-from .region import assign_materials
+from .region import assign_materials, local_cell_markers
 
 __all__ = ["EVENTS", "EnergyProblem", "compile_forms", "default_quadrature_degree"]
 
@@ -160,8 +165,9 @@ class EnergyProblem:
         #: (material, measure) of each elastic integral: one per model in use
         self.elastic_terms = [] if self.mixed else [(self.material, self.dx_elastic)]
         self.W0 = compat.cell_space(mesh)  # per-cell data: region parameters, energy density
-        if scene.get("region"):
-            self._regions()
+        self.bodies = scene.get("body") or []
+        if scene.get("region") or self.bodies:
+            self._regions(body_regions(scene) if self.bodies else None)
         self.dx_mass = inertia_forms.mass_measure(dx, degree, mat["mass"] == "lumped")
         # Gravity shares the inertia measure: exact either way (linear integrand; for lumped
         # P1 the vertex rule gives exactly sum_i m_i g.u_i). Integrating it at a lower degree
@@ -290,6 +296,9 @@ class EnergyProblem:
         self._cell_volumes = None
 
         self.unknown = unknown
+        n_cells = mesh.topology.index_map(d).size_local + mesh.topology.index_map(d).num_ghosts
+        self.cell_body = local_cell_markers(self.domain) - 1 if self.bodies else \
+            np.zeros(n_cells, np.int32)
         #: the pins on V (mass, initial acceleration) and on the unknown (the step): the same
         #: conditions unless the unknown is the mixed w
         self.displacement_bcs = self._pins()
@@ -300,15 +309,22 @@ class EnergyProblem:
             mu_value, inv_kappa = float(self.mu.value), float(self.inv_kappa.value)
             self.schur = SchurPreconditioner(self.fields, compiled["pressure_mass"],
                                              mu_value * (1.0 + mu_value * inv_kappa))
+        self.ipc = None  # [contact]: IPC barrier between surfaces (fem_anim/ipc_contact.py)
+        if "contact" in scene.data:
+            pinned = np.concatenate([bc.dof_indices()[0] for bc in self.displacement_bcs] +
+                                    [np.empty(0, np.int32)])
+            names = [b["name"] for b in self.bodies] or ["body"]
+            self.ipc = IPCContact(scene["contact"], self.u, pinned, names, self.cell_body)
 
     # -- construction helpers -------------------------------------------------------------
-    def _regions(self) -> None:
+    def _regions(self, regions: list[dict] | None = None) -> None:
         """Per-region materials (:mod:`fem_anim.region`): DG0 fields replace the constants
         :attr:`mu`, :attr:`lmbda`, :attr:`rho`, and :attr:`elastic_terms` gets one measure
-        per material model in use (cell tags = model index).
+        per material model in use (cell tags = model index). ``regions``: the bodies'
+        (:func:`fem_anim.body.body_regions`) instead of the scene's ``[[region]]``.
         """
         mesh = self.domain.mesh
-        self.material_map = cells = assign_materials(self.scene, self.domain)
+        self.material_map = cells = assign_materials(self.scene, self.domain, regions)
         Q = self.W0
         cell_dofs = compat.cell_dofs(Q).reshape(-1)[: cells.cell_material.size]
         E, nu = cells.cell_values("youngs_modulus"), cells.cell_values("poisson_ratio")
@@ -408,7 +424,7 @@ class EnergyProblem:
         self.moving_pins: list[PinMotion] = []
         self._pin_dofs: list[np.ndarray] = []  # nodes of V held by each pin
         coordinates = self.V.tabulate_dof_coordinates()[:, : self.d]
-        for i, pin in enumerate(self.scene["pin"]):
+        for body, where, pin in body_pins(self.scene):
             lo = np.asarray(pin["min"], dtype=float)
             hi = np.asarray(pin["max"], dtype=float)
 
@@ -417,11 +433,17 @@ class EnergyProblem:
                 return np.all((x[:d].T >= lo) & (x[:d].T <= hi), axis=1)
 
             dofs = fem.locate_dofs_geometrical(self.V, inside)
+            if body is not None:  # a body's pin holds that body's vertices only
+                k = [b["name"] for b in self.bodies].index(body)
+                cells = np.flatnonzero(self.cell_body == k).astype(np.int32)
+                dofs = np.intersect1d(dofs, fem.locate_dofs_topological(self.V, self.d, cells))
+                dofs = dofs.astype(np.int32)
             coordinates_i = coordinates[dofs]
             owned = dofs[dofs < self.V.dofmap.index_map.size_local]
             if self.comm.allreduce(owned.size, op=MPI.SUM) == 0:
-                raise SceneError(f"pin[{i}] ({pin['name']}): the box min {pin['min']}, max "
-                                 f"{pin['max']} contains no mesh vertex")
+                of = f" of body {body!r}" if body is not None else ""
+                raise SceneError(f"{where} ({pin['name']}): the box min {pin['min']}, max "
+                                 f"{pin['max']} contains no mesh vertex{of}")
             bcs.append(fem.dirichletbc(self.u_bc, dofs))
             self._pin_dofs.append(dofs)
             if pin["velocity"] is not None or pin["angular_velocity"] != 0:
@@ -510,6 +532,8 @@ class EnergyProblem:
             value = np.inf  # a contact point on or through an obstacle: the barrier is +inf
         else:
             value = self.assemble_scalar(self.objective_form)
+            if self.ipc is not None:  # the barrier: +inf at contact
+                value += float(self.weight.value) * self.ipc.energy()
         EVENTS["objective"].end()
         self.assembly_s += time.perf_counter() - start
         return value
@@ -524,6 +548,8 @@ class EnergyProblem:
         fem_petsc.assemble_vector(b, self.residual_form)
         fem_petsc.apply_lifting(b, [self.jacobian_form], [self.bcs], [x], -1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self.ipc is not None:
+            self.ipc.add_gradient(b, float(self.weight.value))
         fem_petsc.set_bc(b, self.bcs, x, -1.0)
         EVENTS["residual"].end()
         self.assembly_s += time.perf_counter() - start
@@ -540,6 +566,9 @@ class EnergyProblem:
             self.tangent_data.update()
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self.jacobian_form, self.bcs)
+        if self.ipc is not None:
+            A.assemble(PETSc.Mat.AssemblyType.FLUSH)
+            self.ipc.add_hessian(A, float(self.weight.value))
         A.assemble()
         if self.schur is not None:
             self.schur.update(float(self.weight.value))
@@ -557,6 +586,8 @@ class EnergyProblem:
         """
         A = fem_petsc.create_matrix(self.jacobian_form, mat_type)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        if self.ipc is not None:  # contact pairs couple dofs the elastic pattern does not
+            A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         if not self.mixed:  # the modes of the displacement block only: not set for (u, p)
             A.setNearNullSpace(self.rigid_body_modes())
         return A
@@ -601,6 +632,8 @@ class EnergyProblem:
         EVENTS["energies"].end()
         values.setdefault("gravity", 0.0)
         values.setdefault("contact", 0.0)
+        if self.ipc is not None:
+            values["contact"] += self.ipc.energy(friction=False)  # stored, not dissipated
         values["total_energy"] = values["kinetic"] + values["elastic"] + values["gravity"] + \
             values["contact"]
         return values

@@ -98,7 +98,10 @@ def _select(domain: SimplexMesh, region: dict, i: int, markers) -> np.ndarray:
         _, n = _num_local_cells(mesh)
         centroids = dmesh.compute_midpoints(mesh, d, np.arange(n, dtype=np.int32))[:, :d]
         lo, hi = np.asarray(region["min"], float), np.asarray(region["max"], float)
-        return np.all((centroids >= lo) & (centroids <= hi), axis=1)
+        inside = np.all((centroids >= lo) & (centroids <= hi), axis=1)
+        if region.get("within") is not None:  # a body's region: that body's cells only
+            inside &= markers() == domain.marker_names[region["within"]]
+        return inside
     if region["name"] not in domain.marker_names:
         known = ", ".join(sorted(domain.marker_names)) or "none: the mesh has no named groups"
         raise SceneError(f"region[{i}].name = {region['name']!r} is not a physical group of "
@@ -107,8 +110,13 @@ def _select(domain: SimplexMesh, region: dict, i: int, markers) -> np.ndarray:
     return markers() == domain.marker_names[region["name"]]
 
 
-def assign_materials(scene, domain: SimplexMesh) -> MaterialMap:
+def assign_materials(scene, domain: SimplexMesh, regions: list[dict] | None = None
+                     ) -> MaterialMap:
     """Resolve ``[material]`` and ``[[region]]`` into a material per local cell (collective).
+
+    ``regions`` replaces the scene's ``[[region]]`` list (the bodies of a multi-body scene,
+    :func:`fem_anim.body.body_regions`); a region's optional ``within`` (a group name)
+    restricts its box to that group's cells.
 
     Raises:
         SceneError: on every rank, for an unknown group name (listing the known ones), a
@@ -116,6 +124,7 @@ def assign_materials(scene, domain: SimplexMesh) -> MaterialMap:
     """
     comm = domain.mesh.comm
     owned, n = _num_local_cells(domain.mesh)
+    regions = scene["region"] if regions is None else regions
     base = scene["material"]
     materials = [MaterialSpec(*(base[k] for k in KEYS))]
     cell_material = np.zeros(n, dtype=np.int32)
@@ -127,15 +136,15 @@ def assign_materials(scene, domain: SimplexMesh) -> MaterialMap:
             cache.append(local_cell_markers(domain))
         return cache[0]
 
-    if any(r["min"] is None for r in scene["region"]):
+    if any(r["min"] is None or r.get("within") is not None for r in regions):
         markers()
-    for i, region in enumerate(scene["region"]):
+    for i, region in enumerate(regions):
         materials.append(MaterialSpec(*(base[k] if region[k] is None else region[k]
                                         for k in KEYS)))
         selected = _select(domain, region, i, markers)
         selections.append(selected)
         cell_material[selected] = i + 1
-    _check_nonempty(comm, scene["region"], selections, cell_material[:owned], owned)
+    _check_nonempty(comm, regions, selections, cell_material[:owned], owned)
     models_used = {materials[k].model for k in np.unique(cell_material[:owned])}
     models = sorted(set().union(*comm.allgather(models_used)))
     model_index = np.array([models.index(m.model) if m.model in models else -1

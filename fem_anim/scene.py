@@ -10,7 +10,10 @@ Sections describing the body and the run (``mesh``, ``element``, ``material``,
 terms (``gravity``, ``pin``, ``obstacle``) exist only when the scene declares them.
 ``[[region]]`` entries override the body's ``[material]`` on parts of the mesh
 (:mod:`fem_anim.region`); ``[initial]`` gives the body a rigid initial velocity
-(:mod:`fem_anim.initial`). Rules between keys (lengths match ``mesh.dim``, boxes are not
+(:mod:`fem_anim.initial`). ``[[body]]`` tables describe several bodies, each with its
+own ``mesh``, ``material``, ``initial``, ``[[body.pin]]`` and ``[[body.region]]``
+(:mod:`fem_anim.body`); ``[contact]`` makes surfaces repel each other
+(:mod:`fem_anim.ipc_contact`). Rules between keys (lengths match ``mesh.dim``, boxes are not
 empty, settings are compatible) are checked after each key's own, in
 :mod:`fem_anim.scene_consistency`.
 """
@@ -91,6 +94,12 @@ def _steps(v) -> str | None:
     if v < 1:
         return "must be >= 1"
     return None if v <= MAX_STEPS else f"must be at most {MAX_STEPS}"
+
+
+def _stiffness(v) -> str | None:
+    if isinstance(v, str):
+        return None if v == "adaptive" else "must be a number of Pa or \"adaptive\""
+    return _positive(v)
 
 
 def _scene_name(v) -> str | None:
@@ -178,8 +187,9 @@ def _check_string(path: str, value: str) -> None:
         raise SceneError(f"{path} must not contain control characters, got {_show(value)}")
 
 
-#: What ``render.color_by`` may name: vertex |displacement| or the cells' mean psi.
-COLOR_FIELDS = ("displacement", "energy_density")
+#: What ``render.color_by`` may name: vertex |displacement|, the cells' mean psi, or one
+#: colour per body (the mesh's connected parts: the ``[[body]]`` tables in order).
+COLOR_FIELDS = ("displacement", "energy_density", "body")
 #: Named camera views (``auto``: ``side`` in 3D, ``xy`` in 2D; see fem_anim/render.py).
 VIEWS = ("auto", "side", "iso", "xy", "xz", "yz")
 #: What ``render.outputs`` may list: PNG frames, an animated GIF, an MP4 video.
@@ -296,6 +306,20 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "friction": Key(NUM, 0.0, _non_negative),
         "epsv": Key(NUM, 1.0e-3, _positive),
     },
+    "body": {  # one of several bodies (fem_anim/body.py); sub-tables as at the top level
+        "name": Key(str, None, lambda v: None if NAME_PATTERN.fullmatch(v) else
+                    "must be a simple name (letters, digits, '_', '-', '.'; at most 100 "
+                    "characters)"),
+        "offset": Key(list, None, None, (2, 3)),
+        "rotation": Key(list, None, None, (1, 3)),
+    },
+    "contact": {  # contact between bodies and of a body with itself (fem_anim/ipc_contact.py)
+        "self": Key(bool, True),
+        "dhat": Key(NUM, 1.0e-3, _positive),
+        "stiffness": Key((int, float, str), "adaptive", _stiffness),
+        "friction": Key(NUM, 0.0, _non_negative),
+        "epsv": Key(NUM, 1.0e-3, _positive),
+    },
     "solver": {
         "preset": Key(str, "cholesky"),
         "method": Key(str, "newton", _one_of(NONLINEAR_METHODS)),
@@ -328,16 +352,20 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
 }
 #: Sections that exist only when a scene declares them (physical terms).
-OPTIONAL_SECTIONS = ("gravity", "damping", "initial")
+OPTIONAL_SECTIONS = ("gravity", "damping", "initial", "contact")
 #: Sections that are arrays of tables (``[[pin]]``, ``[[region]]``, ``[[obstacle]]``).
 ARRAY_SECTIONS = ("pin", "region", "obstacle")
+#: Sub-tables of a ``[[body]]``: the top-level sections that describe one body.
+BODY_TABLES = ("mesh", "material", "initial")
+BODY_ARRAYS = ("pin", "region")
 #: Keys without a default that a declared optional section must give.
 REQUIRED = {"gravity": ("acceleration",), "pin": ("min", "max"), "region": ("name",),
-            "obstacle": ("type",)}
+            "obstacle": ("type",), "body": ("name",)}
 
 DEFAULTS: dict[str, dict[str, Any]] = {
     section: {k: key.default for k, key in keys.items()}
-    for section, keys in SCHEMA.items() if section not in OPTIONAL_SECTIONS + ARRAY_SECTIONS
+    for section, keys in SCHEMA.items()
+    if section not in OPTIONAL_SECTIONS + ARRAY_SECTIONS + ("body",)
 }
 
 
@@ -485,7 +513,9 @@ def _validate(raw: Mapping[str, Any]) -> dict[str, Any]:
     for section, keys in SCHEMA.items():
         if not section:
             continue
-        if section in ARRAY_SECTIONS:
+        if section == "body":
+            data["body"] = _validate_bodies(raw)
+        elif section in ARRAY_SECTIONS:
             entries = raw.get(section, [])
             if not isinstance(entries, list):
                 raise SceneError(f"{section} must be an array of tables ([[{section}]]), "
@@ -497,8 +527,54 @@ def _validate(raw: Mapping[str, Any]) -> dict[str, Any]:
                 data[section] = _validate_table(section, raw[section], keys, section)
         else:
             data[section] = _validate_table(section, raw.get(section, {}), keys, section)
+    if data["body"]:
+        data["mesh"] = dict(data["mesh"], dim=data["body"][0]["mesh"]["dim"])
+        data["material"] = dict(data["body"][0]["material"])
+        if len(data["body"]) > 1 and "contact" not in data:
+            data["contact"] = {k: key.default for k, key in SCHEMA["contact"].items()}
     check_consistency(data)
     return data
+
+
+def _validate_bodies(raw: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """``[[body]]`` tables: their own keys, then each sub-table with its top-level schema.
+
+    With bodies the top-level tables that describe one body may not be given (their
+    meaning would be ambiguous): each body carries its own.
+    """
+    entries = raw.get("body", [])
+    if not isinstance(entries, list):
+        raise SceneError(f"body must be an array of tables ([[body]]), got {_show(entries)}")
+    if entries:
+        for section in BODY_TABLES + BODY_ARRAYS:
+            if section in raw:
+                raise SceneError(f"{section} must not be given at the top level with [[body]] "
+                                 f"tables: give it in each body (body[i].{section})")
+    bodies = []
+    for i, entry in enumerate(entries):
+        where = f"body[{i}]"
+        if not isinstance(entry, dict):
+            raise SceneError(f"{where} must be a table, got {_show(entry)}")
+        for k in entry:
+            if k not in SCHEMA["body"] and k not in BODY_TABLES + BODY_ARRAYS:
+                known = ", ".join([*SCHEMA["body"], *BODY_TABLES, *BODY_ARRAYS])
+                raise SceneError(f"unknown key {where}.{_key(k)} (known: {known})")
+        own = {k: v for k, v in entry.items() if k not in BODY_TABLES + BODY_ARRAYS}
+        body = _validate_table("body", own, SCHEMA["body"], where)
+        for section in BODY_TABLES:
+            if section == "initial" and section not in entry:
+                continue
+            body[section] = _validate_table(section, entry.get(section, {}), SCHEMA[section],
+                                            f"{where}.{section}")
+        for section in BODY_ARRAYS:
+            items = entry.get(section, [])
+            if not isinstance(items, list):
+                raise SceneError(f"{where}.{section} must be an array of tables "
+                                 f"([[body.{section}]]), got {_show(items)}")
+            body[section] = [_validate_table(section, e, SCHEMA[section], f"{where}.{section}[{j}]")
+                             for j, e in enumerate(items)]
+        bodies.append(body)
+    return bodies
 
 
 def _parse_toml(text: str) -> dict[str, Any]:

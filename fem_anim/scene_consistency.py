@@ -92,56 +92,71 @@ def _estimated_cells(mesh: dict[str, Any]) -> float:
     return measure / h ** d * math.factorial(d)
 
 
-def check_consistency(data: dict[str, Any]) -> None:
-    """Cross-key rules: dimensions agree, files exist, settings are compatible."""
-    d = data["mesh"]["dim"]
-    mesh = data["mesh"]
+def _check_mesh(mesh: dict[str, Any], where: str = "mesh") -> None:
+    """A ``[mesh]`` table (top level, or a body's) on its own."""
+    d = mesh["dim"]
     if mesh["shape"] == "box" and len(mesh["size"]) != d:
-        raise SceneError(f"mesh.size must have {d} entries for mesh.dim = {d}, got {mesh['size']}")
+        raise SceneError(f"{where}.size must have {d} entries for {where}.dim = {d}, "
+                         f"got {mesh['size']}")
     if mesh["origin"] is not None and len(mesh["origin"]) != d:
-        raise SceneError(f"mesh.origin must have {d} entries for mesh.dim = {d}, "
+        raise SceneError(f"{where}.origin must have {d} entries for {where}.dim = {d}, "
                          f"got {mesh['origin']}")
     if mesh["shape"] == "file" and mesh["file"] is None:
-        raise SceneError("mesh.file is required when mesh.shape = \"file\"")
+        raise SceneError(f"{where}.file is required when {where}.shape = \"file\"")
     if mesh["file"] is not None and mesh["shape"] != "file":
         # an error, not a guess: defaults are filled in before this check, so a scene's
         # explicit shape = "box" and an absent one look alike here
-        raise SceneError(f"mesh.file = {mesh['file']!r} is not used with mesh.shape = "
-                         f"{mesh['shape']!r}: set mesh.shape = \"file\" to simulate the file")
+        raise SceneError(f"{where}.file = {mesh['file']!r} is not used with {where}.shape = "
+                         f"{mesh['shape']!r}: set {where}.shape = \"file\" to simulate the file")
     if mesh["shape"] == "box" and mesh["element_size"] > max(mesh["size"]):
-        raise SceneError(f"mesh.element_size must not exceed the box size "
+        raise SceneError(f"{where}.element_size must not exceed the box size "
                          f"{max(mesh['size'])}, got {mesh['element_size']}")
     if mesh["shape"] == "torus" and mesh["minor_radius"] >= mesh["radius"]:
-        raise SceneError(f"mesh.minor_radius must be < mesh.radius = {mesh['radius']}, got "
-                         f"{mesh['minor_radius']}")
+        raise SceneError(f"{where}.minor_radius must be < {where}.radius = {mesh['radius']}, "
+                         f"got {mesh['minor_radius']}")
     cells = _estimated_cells(mesh)
     if cells > MAX_CELLS:
-        raise SceneError(f"mesh.element_size = {mesh['element_size']} would make about "
+        raise SceneError(f"{where}.element_size = {mesh['element_size']} would make about "
                          f"{cells:.2g} cells for this {mesh['shape']} (at most {MAX_CELLS:.0e}); "
                          "use a larger element size")
+
+
+def _check_pins(pins: list[dict[str, Any]], d: int, prefix: str = "") -> None:
+    """``[[pin]]`` boxes (top level, or a body's ``[[body.pin]]`` with ``prefix`` ``body[k].``)."""
+    for i, pin in enumerate(pins):
+        lo, hi = pin["min"], pin["max"]
+        if len(lo) != d or len(hi) != d:
+            raise SceneError(f"{prefix}pin[{i}].min and {prefix}pin[{i}].max must have {d} "
+                             f"entries for mesh.dim = {d}, got {lo} and {hi}")
+        if any(a > b for a, b in zip(lo, hi)):
+            raise SceneError(f"{prefix}pin[{i}] ({pin['name']}) is an empty box: min {lo} "
+                             f"exceeds max {hi}")
+        for key in ("velocity", "center"):
+            if pin[key] is not None and len(pin[key]) != d:
+                raise SceneError(f"{prefix}pin[{i}].{key} must have {d} entries for "
+                                 f"mesh.dim = {d}, got {pin[key]}")
+        if pin["axis"] is not None:
+            if d == 2:
+                raise SceneError(f"{prefix}pin[{i}].axis is for mesh.dim = 3 (2D rotations are "
+                                 "about the z axis)")
+            if not any(pin["axis"]):
+                raise SceneError(f"{prefix}pin[{i}].axis must not be the zero vector")
+        if pin["angular_velocity"] != 0 and d == 3 and pin["axis"] is None:
+            raise SceneError(f"{prefix}pin[{i}].axis is required with "
+                             f"{prefix}pin[{i}].angular_velocity")
+
+
+def check_consistency(data: dict[str, Any]) -> None:
+    """Cross-key rules: dimensions agree, files exist, settings are compatible."""
+    d = data["mesh"]["dim"]
+    if data["body"]:
+        _check_bodies(data)
+    else:
+        _check_mesh(data["mesh"])
     if "gravity" in data and len(data["gravity"]["acceleration"]) != d:
         raise SceneError(f"gravity.acceleration must have {d} entries for mesh.dim = {d}, "
                          f"got {data['gravity']['acceleration']}")
-    for i, pin in enumerate(data["pin"]):
-        lo, hi = pin["min"], pin["max"]
-        if len(lo) != d or len(hi) != d:
-            raise SceneError(f"pin[{i}].min and pin[{i}].max must have {d} entries for "
-                             f"mesh.dim = {d}, got {lo} and {hi}")
-        if any(a > b for a, b in zip(lo, hi)):
-            raise SceneError(f"pin[{i}] ({pin['name']}) is an empty box: min {lo} exceeds "
-                             f"max {hi}")
-        for key in ("velocity", "center"):
-            if pin[key] is not None and len(pin[key]) != d:
-                raise SceneError(f"pin[{i}].{key} must have {d} entries for mesh.dim = {d}, "
-                                 f"got {pin[key]}")
-        if pin["axis"] is not None:
-            if d == 2:
-                raise SceneError(f"pin[{i}].axis is for mesh.dim = 3 (2D rotations are about "
-                                 "the z axis)")
-            if not any(pin["axis"]):
-                raise SceneError(f"pin[{i}].axis must not be the zero vector")
-        if pin["angular_velocity"] != 0 and d == 3 and pin["axis"] is None:
-            raise SceneError(f"pin[{i}].axis is required with pin[{i}].angular_velocity")
+    _check_pins(data["pin"], d)
     _check_regions(data)
     _check_initial(data)
     for i, obstacle in enumerate(data["obstacle"]):
@@ -155,6 +170,9 @@ def check_consistency(data: dict[str, Any]) -> None:
         raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
                          "(row-sum lumping of P2 gives zero or negative vertex masses); use "
                          "\"consistent\"")
+    if "contact" in data and data["element"]["degree"] != 1:
+        raise SceneError("[contact] (the IPC Toolkit's barrier between surfaces) supports "
+                         f"element.degree = 1 only, got {data['element']['degree']}")
     solver = data["solver"]
     if solver["hessian"] != "exact" and solver["method"] not in HESSIAN_METHODS:
         raise SceneError(f"solver.hessian = \"{solver['hessian']}\" modifies Newton's "
@@ -165,15 +183,56 @@ def check_consistency(data: dict[str, Any]) -> None:
                          "none (use 'newton' or 'trust_region')")
 
 
-def _check_regions(data: dict[str, Any]) -> None:
+def _check_bodies(data: dict[str, Any]) -> None:
+    """``[[body]]``: unique names, one dimension and one kind of mass, each body's own tables."""
+    bodies = data["body"]
+    d = bodies[0]["mesh"]["dim"]
+    seen: dict[str, int] = {}
+    for k, body in enumerate(bodies):
+        where = f"body[{k}]"
+        if body["name"] in seen:
+            raise SceneError(f"{where}.name = {body['name']!r} is already used by "
+                             f"body[{seen[body['name']]}]")
+        seen[body["name"]] = k
+        _check_mesh(body["mesh"], f"{where}.mesh")
+        if body["mesh"]["dim"] != d:
+            raise SceneError(f"{where}.mesh.dim must equal body[0].mesh.dim = {d} (all bodies "
+                             f"share one mesh), got {body['mesh']['dim']}")
+        if body["material"]["mass"] != bodies[0]["material"]["mass"]:
+            raise SceneError(f"{where}.material.mass must equal body[0].material.mass = "
+                             f"{bodies[0]['material']['mass']!r} (one mass matrix), got "
+                             f"{body['material']['mass']!r}")
+        for key, n in (("offset", d), ("rotation", 3 if d == 3 else 1)):
+            if body[key] is not None and len(body[key]) != n:
+                raise SceneError(f"{where}.{key} must have {n} entries for mesh.dim = {d}, "
+                                 f"got {body[key]}")
+        _check_pins(body["pin"], d, f"{where}.")
+        if "initial" in body:
+            _check_initial({"mesh": {"dim": d}, "initial": body["initial"]}, f"{where}.")
+        for i, region in enumerate(body["region"]):
+            if region["min"] is None or region["max"] is None:
+                raise SceneError(f"{where}.region[{i}] ({region['name']}) needs min and max "
+                                 "(a box of the body's cells, in scene coordinates)")
+        _check_regions({"mesh": {"dim": d}, "region": body["region"],
+                        "material": body["material"], "solver": data["solver"]},
+                       f"{where}.")
+    models = {b["material"]["model"] for b in bodies} | \
+        {r["model"] for b in bodies for r in b["region"] if r["model"]}
+    if len(models) > 1 and data["solver"]["hessian"] == "project":
+        raise SceneError("solver.hessian = \"project\" takes one material model; the bodies "
+                         f"use {', '.join(sorted(models))} (use \"shift\")")
+
+
+def _check_regions(data: dict[str, Any], prefix: str = "") -> None:
     """``[[region]]``: a box (``min`` and ``max``) or a mesh group name; names unique;
     at least one material key; settings the regions' models allow."""
     d = data["mesh"]["dim"]
     seen: dict[str, int] = {}
     for i, region in enumerate(data["region"]):
-        where = f"region[{i}] ({region['name']})"
+        where = f"{prefix}region[{i}] ({region['name']})"
         if region["name"] in seen:
-            raise SceneError(f"{where}: the name is already used by region[{seen[region['name']]}]")
+            raise SceneError(f"{where}: the name is already used by "
+                             f"{prefix}region[{seen[region['name']]}]")
         seen[region["name"]] = i
         lo, hi = region["min"], region["max"]
         if (lo is None) != (hi is None):
@@ -181,7 +240,8 @@ def _check_regions(data: dict[str, Any]) -> None:
                              "neither (the name is then a physical group of the mesh)")
         if lo is not None:
             if len(lo) != d or len(hi) != d:
-                raise SceneError(f"region[{i}].min and region[{i}].max must have {d} entries "
+                raise SceneError(f"{prefix}region[{i}].min and {prefix}region[{i}].max must "
+                                 f"have {d} entries "
                                  f"for mesh.dim = {d}, got {lo} and {hi}")
             if any(a > b for a, b in zip(lo, hi)):
                 raise SceneError(f"{where} is an empty box: min {lo} exceeds max {hi}")
@@ -194,26 +254,28 @@ def _check_regions(data: dict[str, Any]) -> None:
                          f"regions use {', '.join(sorted(models))} (use \"shift\")")
 
 
-def _check_initial(data: dict[str, Any]) -> None:
+def _check_initial(data: dict[str, Any], prefix: str = "") -> None:
     """``[initial]``: vectors of the mesh dimension; omega a number in 2D, 3 numbers in 3D."""
     if "initial" not in data:
         return
     d, initial = data["mesh"]["dim"], data["initial"]
     for key in ("velocity", "center"):
         if initial[key] is not None and len(initial[key]) != d:
-            raise SceneError(f"initial.{key} must have {d} entries for mesh.dim = {d}, "
+            raise SceneError(f"{prefix}initial.{key} must have {d} entries for mesh.dim = {d}, "
                              f"got {initial[key]}")
     omega = initial["angular_velocity"]
     if d == 2 and isinstance(omega, list):
-        raise SceneError("initial.angular_velocity must be a number (rad/s about z) for "
+        raise SceneError(f"{prefix}initial.angular_velocity must be a number (rad/s about z) "
+                         "for "
                          f"mesh.dim = 2, got {show_value(omega)}")
     if d == 3 and omega is not None and not (
             isinstance(omega, list) and len(omega) == 3
             and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in omega)):
-        raise SceneError("initial.angular_velocity must be a list of 3 numbers (the angular "
+        raise SceneError(f"{prefix}initial.angular_velocity must be a list of 3 numbers (the "
+                         "angular "
                          f"velocity vector, rad/s) for mesh.dim = 3, got {show_value(omega)}")
     if all(initial[k] is None for k in ("velocity", "angular_velocity")):
-        raise SceneError("[initial] needs velocity or angular_velocity")
+        raise SceneError(f"[{prefix}initial] needs velocity or angular_velocity")
 
 
 def _check_obstacle(i: int, obstacle: dict[str, Any], d: int) -> None:

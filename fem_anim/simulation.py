@@ -27,8 +27,9 @@ from .energy import moving_pins
 from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
 from .initial import initial_velocity
 from .integrator import Integrator, State
+from .body import build_scene_mesh
 from .interrupt import Interrupts
-from .mesh import SimplexMesh, build_mesh
+from .mesh import SimplexMesh
 from .output import (CellGather, RunDirectory, StatsWriter, TrajectoryWriter, VertexGather,
                      write_final, write_scene)
 from .petsc_options import flatten_options, merge_options
@@ -122,13 +123,14 @@ class Simulation:
         if note and comm.rank == 0:
             print(f"fem-anim: {note}", file=sys.stderr)
         with self.clock.phase("mesh"):
-            self.domain = domain if domain is not None else build_mesh(comm, scene)
+            self.domain = domain if domain is not None else build_scene_mesh(comm, scene)
         with compat.jit_locks_released(JIT_OPTIONS):  # a Ctrl-C while compiling
             self.problem = EnergyProblem(scene, self.domain)
         self.integrator = Integrator(scene["time"]["integrator"])
         self.minimiser = Minimiser(self.problem, options, settings=scene["solver"])
         self.minimiser.require_read(cli_options or {})
         self.gather = VertexGather(self.domain, self.problem.V)
+        self._average_mass = None  # of a vertex (kg), for IPC's adaptive stiffness
         self.cell_gather = CellGather(self.domain)
         self.clock.add("compile", self.problem.compile_s)
         self.clock.add("setup", time.perf_counter() - start - self.clock.seconds["mesh"]
@@ -202,9 +204,13 @@ class Simulation:
         if p.contact is not None:
             p.contact.stage(h)
         what = f"step {state.step + 1} (t = {state.time + h:.6g} s)"
+        if p.ipc is not None:
+            self._stage_ipc(state.u, h)
         self._initial_guess(u_pred, state.u, what)
         stats = self.minimiser.solve(p.x_work, what=what)
         p.set_state(p.x_work)
+        if p.ipc is not None:
+            p.ipc.finish_step()
         new = integ.update(h, state, p.u.x.array.copy(), u_pred)
         if integ.name == "newmark":
             # The trapezoidal update v_{n+1} = 2 (u_{n+1} - u_n)/h - v_n would carry a kink
@@ -214,6 +220,54 @@ class Simulation:
             p.prescribe_pin_rates(new.time, new.v, new.a)
         p.v.x.array[:] = new.v
         return new, stats
+
+    def _stage_ipc(self, u: np.ndarray, h: float) -> None:
+        """kappa of this step at u_n (:meth:`fem_anim.ipc_contact.IPCContact.stage`)."""
+        p = self.problem
+        p.u.x.array[:] = u
+        p.update_quadrature_data()
+        f = fem_petsc.assemble_vector(p.potential_gradient_form)
+        f.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self._average_mass is None:
+            ones = f.duplicate()
+            ones.set(1.0)
+            M = fem_petsc.assemble_matrix(p.mass_form)
+            M.assemble()
+            Mones = ones.duplicate()
+            M.mult(ones, Mones)  # 1^T M 1 = d m_total over d n_vertices dofs
+            self._average_mass = Mones.sum() / ones.getSize()
+            for obj in (ones, Mones, M):
+                obj.destroy()
+        grad = np.zeros_like(p.u.x.array)
+        grad[: f.array.size] = f.array
+        f.destroy()
+        p.ipc.stage(float(p.weight.value), grad, self._average_mass, h)
+
+    def _collision_free_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> None:
+        """With ``[contact]``: u_n + alpha (u_pred - u_n), pins at their targets, with
+        alpha ipctk's collision-free step size, so the start has no intersection (the
+        barrier is finite on crossed surfaces: the objective cannot reject them).
+
+        Moving pins go only as far as alpha too: Newton's pinned rows x - u_bc then bring
+        them to their targets, each step capped by the CCD, so a pin never pushes one
+        surface through another; if it cannot get there the step fails and is retried
+        smaller (:class:`AdaptiveStepper`).
+        """
+        p = self.problem
+        u = compat.petsc_vec(p.u)
+        p.u.x.array[:] = u_pred
+        fem_petsc.set_bc(u, p.bcs)
+        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        target = p.u.x.array.copy()
+        p.u.x.array[:] = u_last
+        alpha = p.ipc.step_bound(u_last - target)
+        for guess in (u_last + alpha * (target - u_last), u_last):
+            p.u.x.array[:] = guess
+            u.copy(p.x_work)
+            if math.isfinite(p.objective(None, p.x_work)):
+                return
+        raise ConvergenceError(f"{what}: no collision-free start with every element "
+                               "uninverted: reduce time.dt")
 
     def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> None:
         """Start Newton where the objective is finite: the predictor, else u_n, else the
@@ -230,6 +284,9 @@ class Simulation:
         """
         p = self.problem
         x = p.x_work
+        if p.ipc is not None:
+            self._collision_free_guess(u_pred, u_last, what)
+            return
         for guess in (u_pred, u_last):
             p.load_guess(guess, x)
             if math.isfinite(p.objective(None, x)):
@@ -395,6 +452,7 @@ class Simulation:
     def timed_step(self, state: State, dt: float) -> tuple[State, dict]:
         """One step and its stats row; a non-finite result counts as not converged."""
         start = time.perf_counter()
+        self._contact_stats()  # the contact time of this step only (not of failed tries)
         new, solve = self.step(state, dt)
         energies = self.problem.energies()
         self._check_finite(new, energies)
@@ -408,7 +466,18 @@ class Simulation:
             "shift": solve.shift, **energies, "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,
             "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,
-            "solve_wall_s": solve.wall_s, "step_wall_s": wall}
+            "solve_wall_s": solve.wall_s, "step_wall_s": wall, **self._contact_stats()}
+
+    def _contact_stats(self) -> dict:
+        """Time in ipctk (detection, barrier, CCD; summed since the last row) and the number
+        of active contact pairs at the end of the step (0 without ``[contact]``)."""
+        ipc = self.problem.ipc
+        if ipc is None:
+            return {"contact_s": 0.0, "contact_pairs": 0}
+        spent = sum(ipc.timers.values())
+        for key in ipc.timers:
+            ipc.timers[key] = 0.0
+        return {"contact_s": spent, "contact_pairs": self.comm.bcast(ipc.num_pairs, root=0)}
 
     def _check_finite(self, state: State, energies: dict[str, float]) -> None:
         """No NaN or inf may reach a frame: stop with a clear message instead."""

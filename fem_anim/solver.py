@@ -18,7 +18,9 @@ the solver's prefix (default ``fem_anim_``), merged with the precedence of
   iterate with an inverted element is ever accepted;
 * obstacles (``[[obstacle]]``): the pre-check scales the Newton direction so that no
   line-search trial brings a contact point onto an obstacle
-  (:meth:`fem_anim.contact.ObstacleContact.step_bound`).
+  (:meth:`fem_anim.contact.ObstacleContact.step_bound`);
+* contact between surfaces (``[contact]``): likewise by ipctk's continuous collision
+  detection (:meth:`fem_anim.ipc_contact.IPCContact.step_bound`), so no trial crosses.
 
 A saddle point (``problem.saddle_point``: ``element.formulation = "mixed"``,
 :mod:`fem_anim.mixed`) is not a minimum of g, so g cannot judge a step: SNES gets no
@@ -323,14 +325,7 @@ class Minimiser:
     def _contact_bound(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
         """Scale y so that no contact point of x - alpha y, 0 < alpha <= 1, nears an obstacle
         by more than :data:`fem_anim.contact.KEEP_FRACTION` of its distance; whether it did."""
-        contact = getattr(self.problem, "contact", None)
-        if contact is None:
-            return False
-        self.problem.set_state(x)
-        alpha = contact.step_bound(y)
-        if alpha < 1.0:
-            y.scale(alpha)
-        return alpha < 1.0
+        return _bound_step(self.problem, x, y) < 1.0
 
     def _jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
         """The problem's Hessian, shifted by c I until it is positive definite if asked.
@@ -442,10 +437,8 @@ class Minimiser:
                 self._decrements.append(np.nan if self.saddle else decrement)
                 if self.stopping == "decrement" and decrement <= self.decrement_tol:
                     return DECREMENT_REASON, norm
-                if getattr(self.problem, "contact", None) is not None:
-                    self.problem.set_state(x)  # a full step must keep clear of obstacles
-                    if self.problem.contact.step_bound(step) < 1.0:
-                        break
+                if _step_limit(self.problem, x, step) < 1.0:
+                    break  # a full step must keep clear of obstacles and other surfaces
                 x.copy(trial)
                 trial.axpy(-1.0, step)
                 self.problem.residual(self.snes, trial, r_trial)
@@ -469,6 +462,30 @@ class Minimiser:
         self.snes.destroy()
         self.A.destroy()
         self.b.destroy()
+
+
+def _step_limit(problem, x: PETSc.Vec, y: PETSc.Vec) -> float:
+    """Largest alpha <= 1 such that x - alpha y keeps clear of obstacles (a fraction of
+    each contact point's distance, :mod:`fem_anim.contact`) and has no surface crossing
+    another or itself on the way (ipctk's CCD, :mod:`fem_anim.ipc_contact`)."""
+    contact, ipc = getattr(problem, "contact", None), getattr(problem, "ipc", None)
+    if contact is None and ipc is None:
+        return 1.0
+    problem.set_state(x)
+    alpha = 1.0
+    if contact is not None:
+        alpha = contact.step_bound(y)
+    if ipc is not None:
+        alpha = min(alpha, ipc.step_bound(y.array))
+    return alpha
+
+
+def _bound_step(problem, x: PETSc.Vec, y: PETSc.Vec) -> float:
+    """Scale y by :func:`_step_limit`; the factor."""
+    alpha = _step_limit(problem, x, y)
+    if alpha < 1.0:
+        y.scale(alpha)
+    return alpha
 
 
 def _resolution(*values: float) -> float:

@@ -135,6 +135,10 @@ def _mesh_scene(name: str) -> str:
 PIN = "[[pin]]\nmin = [0, 0, 0]\nmax = [0.01, 1, 1]\n"
 PLATE = "[mesh]\ndim = 2\nsize = [1.0, 0.2]\n"
 
+#: One 0.1 m cube body moved by ``offset`` along x (format with name, offset).
+BODY = ('[[body]]\nname = "{name}"\noffset = [{offset}, 0, 0]\n'
+        'mesh = {{ shape = "box", size = [0.1, 0.1, 0.1], element_size = 0.05 }}\n')
+
 CORPUS = [
     # -- malformed TOML -------------------------------------------------------------------
     Bad("unterminated-string", ("scene.toml is not valid TOML",), 'name = "beam\n', fresh=True),
@@ -358,6 +362,32 @@ CORPUS = [
     Bad("mooney-rivlin-displacement", (('material.model = "mooney_rivlin" exists only with '
                                         'element.formulation = "mixed"'),),
         '[material]\nmodel = "mooney_rivlin"\n'),
+    # -- bodies and contact (issue 16) ---------------------------------------------------------
+    Bad("bodies-overlap", ("body[1] (b) and body[0] (a) overlap at rest",),
+        BODY.format(name="a", offset=0.0) + BODY.format(name="b", offset=0.05)),
+    Bad("body-inside-body", ("body[1] (b) and body[0] (a) overlap at rest",),
+        BODY.format(name="a", offset=0.0) + '[[body]]\nname = "b"\noffset = [0.04, 0.04, 0.04]\n'
+        'mesh = { shape = "box", size = [0.02, 0.02, 0.02], element_size = 0.02 }\n'),
+    Bad("bodies-within-dhat", ("bodies 'a' and 'b' are closer than contact.dhat = 0.01",),
+        "[contact]\ndhat = 0.01\n" + BODY.format(name="a", offset=0.0)
+        + BODY.format(name="b", offset=0.105)),
+    Bad("contact-dhat-zero", ("contact.dhat must be > 0", "0"), "[contact]\ndhat = 0\n"),
+    Bad("contact-dhat-larger-than-body", ("contact.dhat must be smaller than every body",
+                                          "'b' is only 0.02 m across"),
+        "[contact]\ndhat = 0.05\n" + BODY.format(name="a", offset=0.0)
+        + '[[body]]\nname = "b"\noffset = [0.5, 0, 0]\n'
+        'mesh = { shape = "box", size = [0.1, 0.1, 0.02], element_size = 0.02 }\n'),
+    Bad("contact-p2", ("[contact]", "element.degree = 1 only, got 2"),
+        "[contact]\n[element]\ndegree = 2\n"),
+    Bad("contact-stiffness-word", ("contact.stiffness must be a number of Pa or \"adaptive\"",),
+        '[contact]\nstiffness = "stiff"\n'),
+    Bad("body-duplicate-name", ("body[1].name = 'a' is already used by body[0]",),
+        BODY.format(name="a", offset=0.0) + BODY.format(name="a", offset=0.5)),
+    Bad("body-with-top-level-mesh", ("mesh must not be given at the top level with [[body]]",),
+        "[mesh]\nshape = \"box\"\n" + BODY.format(name="a", offset=0.0)),
+    Bad("body-pin-misses-body", ("body[1].pin[0] (pin): the box", "no mesh vertex of body 'b'"),
+        BODY.format(name="a", offset=0.0) + BODY.format(name="b", offset=0.5)
+        + "[[body.pin]]\nmin = [-1, -1, -1]\nmax = [0.2, 1, 1]\n"),
     # -- --set on a scene file --------------------------------------------------------------
     Bad("set-key-into-list", ("--set pin.first.min: pin is a list; give an entry number",),
         PIN, args=("--set", "pin.first.min=[0, 0, 0]"), fresh=True),
