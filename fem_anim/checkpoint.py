@@ -51,6 +51,7 @@ class Checkpoint:
     rows: list[dict]
     stepper: dict
     shift: float
+    contact: dict  # the IPC contact's state across steps (fem_anim.ipc_contact), or {}
 
 
 def _dof_keys(V, comm: MPI.Comm) -> np.ndarray:
@@ -85,9 +86,10 @@ def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: i
     if comm.rank != 0:
         return
     shift = sim.minimiser.shift.c if sim.minimiser.shift else 0.0
+    ipc = sim.problem.ipc
     meta = {"scene": scene_hash(sim.scene), "time": state.time, "step": state.step,
             "frame": frame, "frames_written": frames_written, "stepper": stepper,
-            "shift": shift, "rows": rows}
+            "shift": shift, "rows": rows, "contact": ipc.state() if ipc is not None else {}}
     buffer = io.BytesIO()
     np.savez(buffer, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
              **arrays)
@@ -124,6 +126,11 @@ def _invalid(meta, data: dict, sim) -> str | None:
         return f"its time steps {dts} are not in (0, time.dt]"
     if not (math.isfinite(meta["shift"]) and meta["shift"] >= 0.0):
         return f"its Hessian shift {meta['shift']!r} is not a finite number >= 0"
+    contact = meta.get("contact", {})
+    if not isinstance(contact, dict) or not all(
+            isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0
+            for v in contact.values()):
+        return f"its contact state {contact!r} is not a table of finite numbers >= 0"
     keys = data.get("keys")
     bs = sim.problem.V.dofmap.index_map_bs
     if keys is None or keys.ndim != 1:
@@ -175,4 +182,4 @@ def load_checkpoint(path: Path, sim) -> Checkpoint:
               for name in FIELDS}
     state = State(**fields, time=meta["time"], step=meta["step"])
     return Checkpoint(state, meta["frame"], meta["frames_written"], meta["rows"],
-                      meta["stepper"], meta["shift"])
+                      meta["stepper"], meta["shift"], meta.get("contact", {}))

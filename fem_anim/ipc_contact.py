@@ -29,6 +29,11 @@ balances the barrier's gradient against w grad E (with ipctk's lower bound from 
 and the scene size), never below the value ``update_barrier_stiffness`` left after the
 previous step (it grows kappa while the minimum distance keeps falling); kappa is fixed
 within a step, so the objective is one function during each minimisation.
+
+ipctk runs on one thread: its parallel loops (TBB) sum in an order that changes from run to
+run, which moved Newton counts by one and the states in their last digits between two runs
+of one scene (measured on the two-cubes scene), so a run resumed from a checkpoint could
+not equal the uninterrupted one. One thread makes every run repeat to the last digit.
 """
 
 from __future__ import annotations
@@ -66,6 +71,7 @@ class IPCContact:
         V = u.function_space
         mesh = V.mesh
         self.comm: MPI.Comm = mesh.comm
+        ipctk.set_num_threads(1)  # repeatable sums (module docstring)
         self.cfg, self.u = cfg, u
         self.dhat = float(cfg["dhat"])
         self.gdim = g = mesh.geometry.dim
@@ -294,6 +300,14 @@ class IPCContact:
         """Rank 0: the smallest distance of the pairs nearer than d_hat (inf if none)."""
         return float(self.collisions.compute_minimum_distance(self.mesh, x)) \
             if self.num_pairs else np.inf
+
+    def state(self) -> dict[str, float]:
+        """What a checkpoint keeps across steps (rank 0's): the adaptive kappa's floor."""
+        return {"kappa_floor": float(self.kappa_floor)}
+
+    def restore(self, state: dict[str, float]) -> None:
+        """Continue from a checkpoint's :meth:`state` (an older one: the floor starts at 0)."""
+        self.kappa_floor = float(state.get("kappa_floor", 0.0))
 
     def finish_step(self) -> None:
         """After an accepted step: IPC's update of kappa from the distance's trend."""

@@ -397,6 +397,8 @@ class Simulation:
             stepper.dt, stepper.last_dt = ck.stepper["dt"], ck.stepper["last_dt"]
             if self.minimiser.shift:
                 self.minimiser.shift.c = ck.shift
+            if self.problem.ipc is not None:
+                self.problem.ipc.restore(ck.contact)
         else:
             state = self.initial_state()
         stats_file = trajectory = None
