@@ -62,9 +62,9 @@ __all__ = [
     "set_schur_user_matrix",
     "quadrature_space",
     "petsc_vec",
-    "cell_dofs",
     "geometry_dofmap",
     "cell_dofs",
+    "dofs_of_cells",
     "create_mesh",
     "colliding_cells",
     "expression",
@@ -156,13 +156,6 @@ def petsc_vec(u: fem.Function):
     return u.vector if LEGACY else u.x.petsc_vec
 
 
-def cell_dofs(V) -> np.ndarray:
-    """Cell -> dof (block) indices of a function space as a (num_cells, dofs_per_cell) array
-    (0.9: ``V.dofmap.list`` is that array already)."""
-    dofs = V.dofmap.list.array
-    return dofs.reshape(-1, V.dofmap.dof_layout.num_dofs)
-
-
 def geometry_dofmap(mesh) -> np.ndarray:
     """Cell -> geometry node indices as a (num_cells, nodes_per_cell) array (ghosts included)."""
     dofmap = mesh.geometry.dofmap
@@ -177,6 +170,15 @@ def cell_dofs(V: fem.FunctionSpace) -> np.ndarray:
     if LEGACY:
         return dofmap.array.reshape(dofmap.num_nodes, -1)
     return dofmap
+
+
+def dofs_of_cells(V: fem.FunctionSpace, cells: np.ndarray) -> np.ndarray:
+    """The (block) dofs of the given local cells, sorted and unique.
+
+    ``fem.locate_dofs_topological(V, tdim, cells)`` does this on 0.5, but on 0.9 it asks
+    for the cell-to-cell connectivity first; the cell dofmap answers on both.
+    """
+    return np.unique(cell_dofs(V)[np.asarray(cells, dtype=np.int64)]).astype(np.int32)
 
 
 def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: str):

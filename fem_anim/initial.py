@@ -77,7 +77,7 @@ def initial_velocity(scene, problem) -> np.ndarray | None:
         dofs = slice(None)
         if body is not None:
             cells = np.flatnonzero(problem.cell_body == body).astype(np.int32)
-            dofs = fem.locate_dofs_topological(problem.V, problem.d, cells)
+            dofs = compat.dofs_of_cells(problem.V, cells)
         v[dofs] = rigid_velocity(X[dofs], cfg["velocity"], cfg["angular_velocity"], center)
     for bc in problem.displacement_bcs:
         v.reshape(-1)[bc.dof_indices()[0]] = 0.0

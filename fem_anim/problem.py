@@ -436,7 +436,7 @@ class EnergyProblem:
             if body is not None:  # a body's pin holds that body's vertices only
                 k = [b["name"] for b in self.bodies].index(body)
                 cells = np.flatnonzero(self.cell_body == k).astype(np.int32)
-                dofs = np.intersect1d(dofs, fem.locate_dofs_topological(self.V, self.d, cells))
+                dofs = np.intersect1d(dofs, compat.dofs_of_cells(self.V, cells))
                 dofs = dofs.astype(np.int32)
             coordinates_i = coordinates[dofs]
             owned = dofs[dofs < self.V.dofmap.index_map.size_local]

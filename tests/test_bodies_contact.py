@@ -19,6 +19,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fem_anim import compat
 from fem_anim.cli import main
 from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
@@ -203,7 +204,7 @@ def body_dofs(problem, k: int) -> np.ndarray:
     from dolfinx import fem
 
     cells = np.flatnonzero(problem.cell_body == k).astype(np.int32)
-    blocks = fem.locate_dofs_topological(problem.V, problem.d, cells)
+    blocks = compat.dofs_of_cells(problem.V, cells)
     return blocks[blocks < problem.V.dofmap.index_map.size_local]
 
 

@@ -44,6 +44,7 @@ FORBIDDEN = {
     r"\bgmshio\b|\bio\.gmsh\b|\bmodel_to_mesh\b": "mesh.py's own gmsh -> arrays path",
     r"\bNonlinearProblem\b": "fem_anim's own SNES (0.10 wraps SNES in NonlinearProblem)",
     r"(?<!compat)\.create_mesh\s*\(": "compat.create_mesh",
+    r"\blocate_dofs_topological\b": "compat.dofs_of_cells (0.9 needs cell-cell connectivity)",
 }
 
 
@@ -107,6 +108,7 @@ def test_no_version_specific_name_outside_compat():
     "la.orthonormalize(vectors)",
     "mesh, ct, ft = gmshio.model_to_mesh(model, comm, 0)",
     "m = dolfinx.mesh.create_mesh(comm, cells, x, domain)",
+    "dofs = fem.locate_dofs_topological(V, 3, cells)",
 ])
 def test_the_check_catches_each_name(tmp_path, line):
     path = tmp_path / "probe.py"
