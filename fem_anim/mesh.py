@@ -18,6 +18,8 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import signal
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -316,10 +318,15 @@ def mesh_from_arrays(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray,
 def _gmsh_session(source: str, hint: str):
     """An initialised, quiet, single-threaded gmsh; its failures become :class:`MeshError`.
 
-    The message names ``source``, gmsh's own error and ``hint``, the likely cause.
+    The message names ``source``, gmsh's own error and ``hint``, the likely cause. The
+    SIGINT handler in force before is put back afterwards: gmsh 4.13's ``initialize`` sets
+    SIGINT to the default action and its ``finalize`` does not restore it (the handler it
+    saves lands in a local variable), which left a run that pressed Ctrl-C while compiling
+    its forms killed outright instead of stopped cleanly (fem_anim.interrupt).
     """
     import gmsh
 
+    sigint = signal.getsignal(signal.SIGINT)
     gmsh.initialize()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -337,6 +344,8 @@ def _gmsh_session(source: str, hint: str):
             raise MeshError(f"{source}: gmsh failed: {detail} ({hint})") from None
     finally:
         gmsh.finalize()
+        if sigint is not None and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, sigint)
 
 
 def _gmsh_arrays(model, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:

@@ -280,8 +280,8 @@ def test_inversion_filter_halves_a_constructed_step(tmp_path):
     state.v[order] = -0.5 * y_ref / h
     iterates = []
 
-    def monitor(snes, it, norm):  # serial: the solution vector holds every dof
-        iterates.append(reference_min_det(points, cells, X + snes.getSolution().array[order]))
+    def monitor(snes, it, norm):  # serial: every dof; read-only (PETSc 3.22 locks it here)
+        iterates.append(reference_min_det(points, cells, X + snes.getSolution().array_r[order]))
 
     negative = []
     library_min_det = p.min_det_F
