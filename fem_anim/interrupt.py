@@ -31,18 +31,14 @@ __all__ = ["Interrupts", "SIGNALS", "stop_at_once"]
 SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
-class Interrupts:
-    """Context manager installing the handlers of :data:`SIGNALS` (main thread only)."""
+class _Handlers:
+    """Installs ``self._handle`` for :data:`SIGNALS` while in use (main thread only; the
+    handlers in force before are put back on exit)."""
 
-    def __init__(self, comm: MPI.Comm):
-        self.comm = comm
-        self.received: int | None = None
+    def __init__(self):
         self._previous: dict[int, object] = {}
-        self._parent: int | None = None  # a parallel run's launcher (or its daemon)
 
-    def __enter__(self) -> Interrupts:
-        if self.comm.size > 1:
-            self._parent = os.getppid()
+    def __enter__(self):
         if threading.current_thread() is threading.main_thread():
             for signum in SIGNALS:
                 self._previous[signum] = signal.signal(signum, self._handle)
@@ -52,6 +48,25 @@ class Interrupts:
         for signum, handler in self._previous.items():
             signal.signal(signum, handler)
         self._previous.clear()
+
+    def _handle(self, signum: int, frame) -> None:
+        raise NotImplementedError
+
+
+class Interrupts(_Handlers):
+    """Context manager: a signal of :data:`SIGNALS` is noted, and every rank stops at the
+    end of the same frame (:meth:`pending`); a second one raises at once."""
+
+    def __init__(self, comm: MPI.Comm):
+        super().__init__()
+        self.comm = comm
+        self.received: int | None = None
+        self._parent: int | None = None  # a parallel run's launcher (or its daemon)
+
+    def __enter__(self) -> Interrupts:
+        if self.comm.size > 1:
+            self._parent = os.getppid()
+        return super().__enter__()
 
     def _handle(self, signum: int, frame) -> None:
         if self.received is not None:  # the second signal: stop now
@@ -68,7 +83,7 @@ class Interrupts:
         return signum or None
 
 
-class stop_at_once:
+class stop_at_once(_Handlers):
     """Context manager: during set-up (meshing, compiling forms) a signal of :data:`SIGNALS`
     raises :class:`~fem_anim.errors.Interrupted` at once.
 
@@ -79,21 +94,6 @@ class stop_at_once:
     :func:`fem_anim.compat.jit_locks_released`).
     """
 
-    def __init__(self):
-        self._previous: dict[int, object] = {}
-
-    def __enter__(self) -> stop_at_once:
-        if threading.current_thread() is threading.main_thread():
-            for signum in SIGNALS:
-                self._previous[signum] = signal.signal(signum, self._handle)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for signum, handler in self._previous.items():
-            signal.signal(signum, handler)
-        self._previous.clear()
-
-    @staticmethod
-    def _handle(signum: int, frame) -> None:
+    def _handle(self, signum: int, frame) -> None:
         raise Interrupted(f"interrupted by {signal.Signals(signum).name} while setting up "
                           "(nothing to keep yet)", signum)

@@ -319,14 +319,15 @@ def _gmsh_session(source: str, hint: str):
     """An initialised, quiet, single-threaded gmsh; its failures become :class:`MeshError`.
 
     The message names ``source``, gmsh's own error and ``hint``, the likely cause. The
-    SIGINT handler in force before is put back afterwards: gmsh 4.13's ``initialize`` sets
-    SIGINT to the default action and its ``finalize`` does not restore it (the handler it
-    saves lands in a local variable), which left a run that pressed Ctrl-C while compiling
-    its forms killed outright instead of stopped cleanly (fem_anim.interrupt).
+    SIGINT handler in force before is put back afterwards: gmsh sets SIGINT to the default
+    action (4.8 when imported, 4.13 in ``initialize``) and 4.13's ``finalize`` does not
+    restore it (the handler it saves lands in a local variable), which left a run that
+    pressed Ctrl-C while compiling its forms killed outright instead of stopped cleanly
+    (fem_anim.interrupt).
     """
+    sigint = signal.getsignal(signal.SIGINT)  # before the import: gmsh 4.8 sets it there
     import gmsh
 
-    sigint = signal.getsignal(signal.SIGINT)
     gmsh.initialize()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
