@@ -322,7 +322,7 @@ def test_block_on_a_slope_sticks_below_the_friction_angle(tmp_path, angle):
     R = rotation_matrix([0, angle, 0], 3)
     offset = R @ np.array([0.15, 0.075, 0.052])  # 2 mm above the slope
     path = tmp_path / "tilt.toml"
-    path.write_text(TILT.format(angle=angle, offset=list(offset)))
+    path.write_text(TILT.format(angle=angle, offset=[float(v) for v in offset]))
     sim = Simulation(load_scene(path))
     states = run_states(sim, 20, 0.01)
     assert_intersection_free(sim, states)

@@ -47,6 +47,11 @@ ENERGIES = ("kinetic", "elastic", "gravity")
 #: displacements within 6.1e-14 (richardson-jacobi), relative.
 ENERGY_RTOL = 2e-11
 DISPLACEMENT_RTOL = 1e-12
+#: The fixed-sweep presets (Richardson + SOR: ksp_max_it sweeps, no residual test) solve each
+#: Newton system only as well as the sweeps contract on the mesh at hand: richardson-sor's
+#: energies were 2.5e-11 and its final displacement 2.3e-10 from cholesky's on gmsh 4.13's
+#: mesh (Debian 13), below 2e-12 and 1e-13 on gmsh 4.8's.
+FIXED_SWEEP_ENERGY_RTOL, FIXED_SWEEP_DISPLACEMENT_RTOL = 2e-10, 2e-9
 
 #: Preconditioners that exist only for one process (PETSc's native factorisations).
 SERIAL_ONLY_PC = {"icc", "ilu"}
@@ -70,14 +75,15 @@ def run(out: Path, *args: str) -> list[dict[str, float]]:
     return read_stats(out / "stats.csv")
 
 
-def assert_same_solution(run_dir: Path, reference: Path) -> None:
+def assert_same_solution(run_dir: Path, reference: Path, energy_rtol: float = ENERGY_RTOL,
+                         displacement_rtol: float = DISPLACEMENT_RTOL) -> None:
     rows, ref = read_stats(run_dir / "stats.csv"), read_stats(reference / "stats.csv")
     assert [r["time"] for r in rows] == pytest.approx([r["time"] for r in ref])
     for row, expected in zip(rows, ref):
         for key in ENERGIES:
-            assert row[key] == pytest.approx(expected[key], rel=ENERGY_RTOL), (row["step"], key)
+            assert row[key] == pytest.approx(expected[key], rel=energy_rtol), (row["step"], key)
     u, u_ref = final_displacement(run_dir), final_displacement(reference)
-    assert np.linalg.norm(u - u_ref) <= DISPLACEMENT_RTOL * np.linalg.norm(u_ref)
+    assert np.linalg.norm(u - u_ref) <= displacement_rtol * np.linalg.norm(u_ref)
 
 
 @pytest.fixture(scope="module")
@@ -93,14 +99,17 @@ def reference(tmp_path_factory) -> Path:
 @pytest.mark.parametrize("name", [n for n in PRESETS if n != "cholesky"])
 def test_preset_reaches_the_cholesky_solution(name, reference, tmp_path):
     rows = run(tmp_path / name, "--solver", name)
-    assert_same_solution(tmp_path / name, reference)
+    fixed_sweeps = name in ("richardson-gauss-seidel", "richardson-sor")
+    assert_same_solution(tmp_path / name, reference, *(
+        (FIXED_SWEEP_ENERGY_RTOL, FIXED_SWEEP_DISPLACEMENT_RTOL) if fixed_sweeps else
+        (ENERGY_RTOL, DISPLACEMENT_RTOL)))
     assert_rows_meet_the_test(rows)
     options = PRESETS[name]
     if options["ksp_type"] == "preonly":  # one factorisation and solve per Newton step
         assert all(r["linear_its"] <= r["newton_its"] + 1 for r in rows)
     else:
         assert all(r["linear_its"] > r["newton_its"] for r in rows)
-    if name in ("richardson-gauss-seidel", "richardson-sor"):
+    if fixed_sweeps:
         # PETSc applies Richardson + SOR as exactly ksp_max_it sweeps per linear solve
         sweeps = int(options["ksp_max_it"])
         assert all(r["linear_its"] % sweeps == 0 for r in rows)

@@ -99,24 +99,29 @@ def test_shift_raises_and_relaxes(tmp_path):
     """c is raised while H + c I is indefinite, then quartered after each success."""
     sim = squash(tmp_path, model="stable_neohookean", hessian="shift")
     shift = sim.minimiser.shift
-    accepted = []  # the shift of every successful factorisation
+    accepted = []  # (shift, raises so far) of every successful factorisation
     succeeded = shift.succeeded
 
     def record():
-        accepted.append(shift.c)
+        accepted.append((shift.c, shift.raises))
         succeeded()
 
     shift.succeeded = record
     run_steps(sim, 4, 0.05)
     assert shift.raises > 0  # the exact Hessian was indefinite at least once
-    peak = max(accepted)
-    assert peak > 0
-    # after the peak (4.0 here), each success quarters c for the next factorisation, which
-    # succeeds at once while the Hessian stays positive definite: c falls by 4 per iteration
-    after = accepted[accepted.index(peak):]
-    assert len(after) >= 5
-    np.testing.assert_allclose(after[1:], 0.25 * np.array(after[:-1]), rtol=1e-15)
-    assert shift.c == 0.25 * accepted[-1] and shift.c < 1e-4 * peak
+    c = np.array([a[0] for a in accepted])
+    raises = np.array([a[1] for a in accepted])
+    peak = int(np.argmax(c))
+    assert c[peak] > 0
+    # each success quarters c for the next factorisation: where that one succeeds at once
+    # (no raise in between) the next accepted c is exactly a quarter, else it was raised
+    # from the quarter (the path depends on the mesh: gmsh 4.8's needs no raise after the
+    # peak of 4.0, gmsh 4.13's one)
+    at_once = raises[peak + 1:] == raises[peak:-1]
+    np.testing.assert_allclose(c[peak + 1:][at_once], 0.25 * c[peak:-1][at_once], rtol=1e-15)
+    assert np.all(c[peak + 1:][~at_once] > 0.25 * c[peak:-1][~at_once])
+    assert np.count_nonzero(at_once) >= 4
+    assert shift.c == 0.25 * c[-1] and shift.c < 1e-4 * c[peak]
 
 
 def test_inversion_filter_prevents_a_nan(tmp_path):
