@@ -36,7 +36,8 @@ __all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "Traject
 RENDER_PRODUCTS = ("final.png", "frames", "animation.gif", "animation.mp4", "energies.png",
                    "newton.png")
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
-                 "residual_norm", "newton_decrement", "shift", "kinetic", "elastic", "gravity",
+                 "residual_norm", "newton_decrement", "shift", "exact_its", "shift_its",
+                 "clamp_its", "abs_its", "kinetic", "elastic", "gravity",
                  "contact", "total_energy", "assembly_s", "factor_s", "linear_solve_s", "other_s",
                  "solve_wall_s", "step_wall_s"]
 

@@ -12,7 +12,10 @@ the solver's prefix (default ``fem_anim_``), merged with the precedence of
   lambda^2/2 = grad g^T H^-1 grad g / 2 <= ``decrement_tol`` (seed definition 4; affine
   invariant, in the units of g), computed exactly from the Newton direction in the line
   search pre-check;
-* ``hessian``: exact, shifted or projected (:mod:`fem_anim.hessian`);
+* ``hessian``: exact, shifted, filtered per quadrature point (clamp, abs), the filter chosen
+  per iteration by the trust-region ratio, or ``auto``: exact while the Hessian is positive
+  definite, abs-filtered when it is not (:mod:`fem_anim.hessian`); each step's iterations are
+  counted per kind of Hessian (:attr:`SolveStats.hessian_its`);
 * ``inversion_filter``: the pre-check halves the Newton step until no element has
   det F <= 0, and the objective is +inf there (:meth:`EnergyProblem.objective`), so no
   iterate with an inverted element is ever accepted;
@@ -24,17 +27,18 @@ the solver's prefix (default ``fem_anim_``), merged with the precedence of
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
 
 import numpy as np
 from petsc4py import PETSc
 
 from .errors import ConvergenceError, FemAnimError
-from .hessian import ShiftStrategy
+from .hessian import RHO_TOLERANCE, ShiftStrategy, model_ratio, trust_region_choice
 from .petsc_options import DEFAULT_PREFIX, options_in_database
 from .problem import EVENTS
 
-__all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "NONLINEAR_METHODS"]
+__all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "NONLINEAR_METHODS", "HESSIAN_KINDS"]
 
 #: Scene ``solver.method`` -> PETSc options (lowest layer above the library defaults).
 NONLINEAR_METHODS: dict[str, dict[str, str]] = {
@@ -56,6 +60,13 @@ ROUNDOFF_ULPS = 4096.0
 #: Reason recorded when the Newton-decrement test stopped the iteration: PETSc's
 #: CONVERGED_ITS ("converged by a user test"; a plain iteration cap is DIVERGED_MAX_IT).
 DECREMENT_REASON = 5
+#: The Hessians a Newton iteration may use (counted per step in :attr:`SolveStats.hessian_its`):
+#: exact, exact + c I with c > 0, elastic tangent clamped, elastic tangent abs-filtered.
+HESSIAN_KINDS = ("exact", "shift", "clamp", "abs")
+#: SNES reasons after which ``hessian = "auto"`` continues the step with the filtered Hessian:
+#: CG met negative curvature (a failed linear solve), or the direction was no descent.
+_AUTO_RESTART = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
+                 PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
 
 
 @dataclass
@@ -63,7 +74,8 @@ class SolveStats:
     """What one minimisation cost and how it ended.
 
     ``newton_decrement`` is lambda^2/2 at the last Newton direction (NaN for methods
-    without one); ``shift`` the last Hessian shift c; times are wall seconds.
+    without one); ``shift`` the last Hessian shift c; ``hessian_its`` the Newton
+    iterations per kind of Hessian (:data:`HESSIAN_KINDS`); times are wall seconds.
     """
 
     newton_its: int
@@ -76,6 +88,7 @@ class SolveStats:
     assembly_s: float = 0.0
     factor_s: float = 0.0
     linear_solve_s: float = 0.0
+    hessian_its: dict = field(default_factory=dict)
 
 
 class Minimiser:
@@ -95,7 +108,15 @@ class Minimiser:
         self.prefix = prefix
         self.stopping = settings.get("stopping", "norm")
         self.decrement_tol = settings.get("decrement_tol", 0.0)
-        self.shift = ShiftStrategy() if settings.get("hessian") == "shift" else None
+        self.mode = settings.get("hessian", "exact")
+        self.shift = ShiftStrategy() if self.mode == "shift" else None
+        self.hessian_its: Counter = Counter()  # this solve's iterations per kind of Hessian
+        self._model = None  # (x_k, y_k, g_k, r.y, y^T H y) of the last direction, for rho
+        self._auto_filtered = False  # auto: this step met an indefinite Hessian
+        self._auto_no_exact = False  # auto: ... in a Krylov solve: filtered to its end
+        self._restarting = False
+        self._last_iterate = None
+        self._inertia = True  # whether the factorisation reports its inertia (auto)
         # -mat_type (aij, baij) picks the Hessian's storage; PETSc never reads it for a
         # matrix the application creates, so it is taken here
         mat_type = options.get("mat_type") or None
@@ -140,30 +161,41 @@ class Minimiser:
         assembly0 = self.problem.assembly_s
         factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
         self._clear_objective_cache()
+        self.hessian_its = Counter()
+        self._model = None
+        self._auto_filtered = self._auto_no_exact = self._restarting = False
         g0 = self.objective(self.snes, x)
-        PETSc.Sys.pushErrorHandler("ignore")  # reported once, below, not as PETSc's stack
-        try:
-            self.snes.solve(None, x)
-        except PETSc.Error as err:
-            raise FemAnimError(f"{what}: PETSc failed inside the solver (error {err.ierr}); "
-                               "check the solver options (e.g. a serial-only preconditioner "
-                               "on several processes)") from None
-        finally:
-            PETSc.Sys.popErrorHandler()
-        reason = self.snes.getConvergedReason()
-        stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
-            self._at_objective_roundoff(x, g0)
+        newton_its = linear_its = 0
+        while True:
+            self._snes_solve(x, what)
+            reason = self.snes.getConvergedReason()
+            newton_its += self.snes.getIterationNumber()
+            linear_its += self.snes.getLinearSolveIterations()
+            stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
+                self._at_objective_roundoff(x, g0)
+            if self.mode == "auto" and reason in _AUTO_RESTART and not stalled and \
+                    not self._auto_no_exact and self._last_iterate is not None:
+                # the exact Hessian was indefinite where no inertia showed it: continue from
+                # the last iterate with the filtered one (the stopping test stays the same)
+                self._auto_filtered = self._auto_no_exact = self._restarting = True
+                self._model = None
+                self._last_iterate.copy(x)
+                continue
+            break
+        if self.mode == "auto":
+            self.problem.set_hessian_filter(None)  # the next step starts exact
         norm = self.snes.getFunctionNorm()
         if reason == ROUNDOFF_REASON or stalled:
             reason, norm = self._polish(x)
         wall = time.perf_counter() - start
         factor1, solve1 = (e.getPerfInfo()["time"] for e in self._events)
         stats = SolveStats(
-            self.snes.getIterationNumber(), self.snes.getLinearSolveIterations(), reason, norm,
+            newton_its, linear_its, reason, norm,
             wall, newton_decrement=self._decrements[-1] if self._decrements else float("nan"),
             shift=self.shift.c if self.shift else 0.0,
             assembly_s=self.problem.assembly_s - assembly0, factor_s=factor1 - factor0,
-            linear_solve_s=solve1 - solve0)
+            linear_solve_s=solve1 - solve0,
+            hessian_its={kind: self.hessian_its[kind] for kind in HESSIAN_KINDS})
         if reason <= 0:
             ksp_reason = self.snes.getKSP().getConvergedReason()
             raise ConvergenceError(
@@ -173,6 +205,17 @@ class Minimiser:
                 f"residual norm {stats.residual_norm:.3e})")
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         return stats
+
+    def _snes_solve(self, x: PETSc.Vec, what: str) -> None:
+        PETSc.Sys.pushErrorHandler("ignore")  # reported once, below, not as PETSc's stack
+        try:
+            self.snes.solve(None, x)
+        except PETSc.Error as err:
+            raise FemAnimError(f"{what}: PETSc failed inside the solver (error {err.ierr}); "
+                               "check the solver options (e.g. a serial-only preconditioner "
+                               "on several processes)") from None
+        finally:
+            PETSc.Sys.popErrorHandler()
 
     def objective(self, snes, x: PETSc.Vec) -> float:
         """g(x), remembered for the last two points of this solve.
@@ -210,8 +253,12 @@ class Minimiser:
         _, _, fnorm = norms
         rtol, atol, _, max_it = snes.getTolerances()
         g = self.objective(snes, snes.getSolution())
-        if it == 0:
-            self._history = []
+        if it == 0 and not self._restarting:
+            self._history = []  # an auto restart keeps the step's first norm (snes_rtol)
+        if it == 0 and self._restarting:
+            self._restarting = False
+            self._history.append((fnorm, g))
+            return PETSc.SNES.ConvergedReason.ITERATING
         self._history.append((fnorm, g))
         R = PETSc.SNES.ConvergedReason
         if not np.isfinite(fnorm):
@@ -241,8 +288,13 @@ class Minimiser:
         """
         self._decrements.append(0.5 * abs(self.b.dot(y)))
         scaled = self._contact_bound(x, y)
-        if not self.problem.filter_inversion:
-            return scaled
+        if self.problem.filter_inversion:
+            scaled = self._filter_inverting(x, y) or scaled
+        self._record_model(x, y)
+        return scaled
+
+    def _filter_inverting(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
+        """Halve y until x - y has det F > 0 everywhere; whether it was changed."""
         trial = x.duplicate()
         EVENTS["filter"].begin()
         try:
@@ -251,13 +303,50 @@ class Minimiser:
                 trial.axpy(-1.0, y)
                 self.problem.set_state(trial)
                 if self.problem.min_det_F() > 0.0:
-                    return scaled or halvings > 0
+                    return halvings > 0
                 y.scale(0.5)
             return True
         finally:
             trial.destroy()
             self.problem.set_state(x)
             EVENTS["filter"].end()
+
+    def _record_model(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        """Keep the exact quadratic model of g at x along y for the next iteration's rho.
+
+        Needed by the trust-region filter, and by ``auto`` once a step has switched to
+        the filtered Hessian: g(x), r.y and y^T H y with H unprojected
+        (:meth:`fem_anim.problem.EnergyProblem.curvature`).
+        """
+        if not (self.mode == "trust_region_filter" or
+                (self.mode == "auto" and self._auto_filtered)):
+            self._model = None
+            return
+        g = self.objective(self.snes, x)
+        slope = self.b.dot(y)
+        curvature = self.problem.curvature(x, y)
+        if self._model is None:
+            self._model = [x.copy(), y.copy(), g, slope, curvature]
+        else:
+            x.copy(self._model[0])
+            y.copy(self._model[1])
+            self._model[2:] = [g, slope, curvature]
+
+    def _model_ratio(self, x: PETSc.Vec) -> float | None:
+        """rho of the step that led to x from the recorded model (None without one)."""
+        if self._model is None:
+            return None
+        x_k, y, g_k, slope, curvature = self._model
+        p = x.duplicate()
+        x.copy(p)
+        p.axpy(-1.0, x_k)  # p = x_{k+1} - x_k = -alpha y
+        yy = y.dot(y)
+        alpha = -p.dot(y) / yy if yy > 0.0 else 0.0
+        p.destroy()
+        self._model[0].destroy()
+        self._model[1].destroy()
+        self._model = None
+        return model_ratio(g_k - self.objective(self.snes, x), slope, curvature, alpha)
 
     def _contact_bound(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
         """Scale y so that no contact point of x - alpha y, 0 < alpha <= 1, nears an obstacle
@@ -279,8 +368,12 @@ class Minimiser:
         Krylov preset CG is run on the shifted matrix and must not meet negative
         curvature. c starts from the last successful shift, quartered (hessian.py).
         """
+        if self.mode in ("trust_region_filter", "auto"):
+            self._filtered_jacobian(snes, x, A, P)
+            return
         self.problem.jacobian(snes, x, A, P)
         if self.shift is None:
+            self.hessian_its[{"project": "clamp", "abs": "abs"}.get(self.mode, "exact")] += 1
             return
         scale = A.getDiagonal().norm(PETSc.NormType.INFINITY)
         c = self.shift.first(scale)
@@ -293,7 +386,59 @@ class Minimiser:
             if c > 1e12 * max(scale, 1.0):
                 raise ConvergenceError("the Hessian shift grew beyond 1e12 x its diagonal: the "
                                        "linear solver never reported a positive definite matrix")
+        self.hessian_its["shift" if c > 0.0 else "exact"] += 1
         self.shift.succeeded()
+
+    def _filtered_jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
+        """The Hessian of ``trust_region_filter`` and ``auto`` (:mod:`fem_anim.hessian`).
+
+        trust_region_filter: clamp if the exact model predicted the last step's decrease
+        to 1 % (|rho - 1| < 0.01), else abs. auto: exact until the step meets an
+        indefinite Hessian (a negative pivot of a Cholesky factorisation, checked here; a
+        Krylov solve's failure, in :meth:`solve`), then abs, or exact again when
+        |rho - 1| < 0.01 (and, for a factorisation, no negative pivot).
+        """
+        rho = self._model_ratio(x)
+        problem = self.problem
+        if self.mode == "trust_region_filter":
+            how = trust_region_choice(rho)
+        else:
+            if self._last_iterate is None:
+                self._last_iterate = x.duplicate()
+            x.copy(self._last_iterate)
+            exact = not self._auto_filtered or (not self._auto_no_exact and rho is not None
+                                                and abs(rho - 1.0) < RHO_TOLERANCE)
+            how = None if exact else "abs"
+        problem.set_hessian_filter(how)
+        problem.jacobian(snes, x, A, P)
+        if self.mode == "auto" and how is None and self._negative_pivots(A):
+            self._auto_filtered = True
+            how = "abs"
+            problem.set_hessian_filter(how)
+            problem.jacobian(snes, x, A, P)
+        self.hessian_its[how or "exact"] += 1
+
+    def _negative_pivots(self, A: PETSc.Mat) -> bool:
+        """Whether the Cholesky factorisation of A (kept for the solve) has a negative pivot.
+
+        False for solvers that report no inertia (Krylov presets, LU): ``auto`` then learns
+        of an indefinite Hessian from the failed solve or line search instead.
+        """
+        ksp = self.snes.getKSP()
+        pc = ksp.getPC()
+        if not self._inertia or pc.getType() != "cholesky":
+            return False
+        ksp.setOperators(A, A)
+        PETSc.Sys.pushErrorHandler("ignore")
+        try:
+            pc.setUp()
+            negative, _, _ = pc.getFactorMatrix().getInertia()
+        except PETSc.Error:
+            self._inertia = False  # this factorisation reports no inertia
+            return False
+        finally:
+            PETSc.Sys.popErrorHandler()
+        return negative > 0
 
     def _positive_definite(self, A: PETSc.Mat) -> bool:
         ksp = self.snes.getKSP()
@@ -402,6 +547,11 @@ class Minimiser:
 
     def destroy(self) -> None:
         self._clear_objective_cache()
+        if self._last_iterate is not None:
+            self._last_iterate.destroy()
+        if self._model is not None:
+            self._model[0].destroy()
+            self._model[1].destroy()
         self.snes.destroy()
         self.A.destroy()
         self.b.destroy()
