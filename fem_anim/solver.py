@@ -149,6 +149,8 @@ class Minimiser:
             PETSc.Sys.popErrorHandler()
         if snes.getType() in ("newtonls",):
             snes.setLineSearchPreCheck(self._precheck)
+        if self.mode == "auto":
+            self._enable_inertia()
 
     def solve(self, x: PETSc.Vec, what: str = "step") -> SolveStats:
         """Minimise from the initial guess ``x`` (overwritten with the minimiser).
@@ -176,7 +178,7 @@ class Minimiser:
             if self.mode == "auto" and reason in _AUTO_RESTART and not stalled and \
                     not self._auto_no_exact and self._last_iterate is not None:
                 # the exact Hessian was indefinite where no inertia showed it: continue from
-                # the last iterate with the filtered one (the stopping test stays the same)
+                # the last iterate filtered (trust-region choice; the same stopping test)
                 self._auto_filtered = self._auto_no_exact = self._restarting = True
                 self._model = None
                 self._last_iterate.copy(x)
@@ -393,10 +395,12 @@ class Minimiser:
         """The Hessian of ``trust_region_filter`` and ``auto`` (:mod:`fem_anim.hessian`).
 
         trust_region_filter: clamp if the exact model predicted the last step's decrease
-        to 1 % (|rho - 1| < 0.01), else abs. auto: exact until the step meets an
-        indefinite Hessian (a negative pivot of a Cholesky factorisation, checked here; a
-        Krylov solve's failure, in :meth:`solve`), then abs, or exact again when
-        |rho - 1| < 0.01 (and, for a factorisation, no negative pivot).
+        to 1 % (|rho - 1| < 0.01), else abs. auto: the exact Hessian whenever it is
+        positive definite; else the trust-region filter's choice. With a Cholesky
+        factorisation every iteration assembles the exact Hessian first and reads the
+        inertia of its factorisation (kept for the solve when it has no negative pivot).
+        Krylov presets show an indefinite Hessian only by a failed solve or line search
+        (:meth:`solve`), after which the step continues filtered.
         """
         rho = self._model_ratio(x)
         problem = self.problem
@@ -406,17 +410,34 @@ class Minimiser:
             if self._last_iterate is None:
                 self._last_iterate = x.duplicate()
             x.copy(self._last_iterate)
-            exact = not self._auto_filtered or (not self._auto_no_exact and rho is not None
-                                                and abs(rho - 1.0) < RHO_TOLERANCE)
-            how = None if exact else "abs"
+            how = trust_region_choice(rho) if self._auto_no_exact else None
         problem.set_hessian_filter(how)
         problem.jacobian(snes, x, A, P)
         if self.mode == "auto" and how is None and self._negative_pivots(A):
             self._auto_filtered = True
-            how = "abs"
+            how = trust_region_choice(rho)
             problem.set_hessian_filter(how)
             problem.jacobian(snes, x, A, P)
         self.hessian_its[how or "exact"] += 1
+
+    def _enable_inertia(self) -> None:
+        """Ask MUMPS's Cholesky for the inertia of its factors (``auto``).
+
+        PETSc 3.18's MatGetInertia for MUMPS answers only with null-pivot detection
+        (ICNTL(24) = 1), and MUMPS reads its ``-mat_mumps_*`` options when it first
+        factorises, after the solver options have left PETSc's database
+        (:func:`fem_anim.petsc_options.options_in_database`): the controls are set on
+        the factor matrix itself, before its first factorisation.
+        """
+        ksp = self.snes.getKSP()
+        pc = ksp.getPC()
+        if pc.getType() != "cholesky" or pc.getFactorSolverType() != "mumps":
+            return
+        ksp.setOperators(self.A, self.A)
+        pc.setFactorSetUpSolverType()
+        factor = pc.getFactorMatrix()
+        factor.setMumpsIcntl(24, 1)  # null pivot detection: MatGetInertia answers
+        factor.setMumpsIcntl(13, 1)  # the inertia of the whole matrix under MPI
 
     def _negative_pivots(self, A: PETSc.Mat) -> bool:
         """Whether the Cholesky factorisation of A (kept for the solve) has a negative pivot.

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fem_anim.hessian import (RHO_TOLERANCE, abs_psd, filter_tangent, model_ratio,
-                              project_psd, trust_region_choice)
+                              positive_definite, project_psd, trust_region_choice)
 
 
 def _tangents(eigenvalues: np.ndarray, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -89,3 +89,10 @@ def test_trust_region_choice_follows_rho():
     expected = ["abs", "abs", "clamp", "clamp", "clamp", "abs", "abs", "abs", "clamp"]
     assert [trust_region_choice(r) for r in rhos] == expected
     assert RHO_TOLERANCE == 0.01
+
+
+def test_positive_definite_agrees_with_the_eigenvalues():
+    rng = np.random.default_rng(7)
+    lam = rng.uniform(-1.0, 4.0, (200, 9))
+    tangent, _ = _tangents(lam, seed=8)
+    np.testing.assert_array_equal(positive_definite(tangent), lam.min(axis=1) > 0)
