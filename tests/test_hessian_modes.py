@@ -150,10 +150,54 @@ def test_reduced_hard_bench_table():
     assert "| crushed cube, StVK | auto | yes |" in table
 
 
+def _default_run(frames: int, hessian: str) -> list[dict]:
+    """The default scene for ``frames`` frames (adaptive stepper): its stats rows."""
+    from fem_anim.simulation import AdaptiveStepper
+
+    scene = load_scene(None, [f"time.steps={frames}", f'solver.hessian="{hessian}"'])
+    sim = Simulation(scene, MPI.COMM_WORLD)
+    h = scene["time"]["dt"]
+    stepper = AdaptiveStepper(sim, h, scene["time"])
+    state = sim.initial_state()
+    rows = []
+    for frame in range(1, frames + 1):
+        for state, row in stepper.advance(state, frame * h):
+            rows.append(row)
+    return rows
+
+
+def test_default_scene_through_its_first_indefinite_hessians():
+    """The default scene to t = 5.6 s: exact Newton needs its first retries at t = 5.4 s
+    (an indefinite Hessian: the line search fails on a non-descent direction); auto filters
+    those iterations (MUMPS's inertia shows them) and takes every step at the full dt."""
+    rows = _default_run(336, "auto")
+    assert len(rows) == 336 and all(r["retries"] == 0 for r in rows)
+    filtered = [r["time"] for r in rows if r["abs_its"] + r["clamp_its"] > 0]
+    assert any(5.35 < t < 5.6 for t in filtered), filtered  # the regime was reached
+    # measured: the first filtered iteration at t = 3.93 s; most steps exact
+    assert sum(r["exact_its"] for r in rows) > 0.9 * sum(r["newton_its"] for r in rows)
+
+
+@pytest.mark.slow
+def test_default_scene_20_seconds_without_a_retry():
+    """1200 frames (20 s; exact Newton: 19 retries by then): auto, no retry."""
+    rows = _default_run(1200, "auto")
+    assert len(rows) == 1200 and all(r["retries"] == 0 for r in rows)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="from t ~ 21 s Newmark's energy grows without bound "
+                   "(every Hessian mode; dt/2 slows it 8x): the run stops at time.min_dt "
+                   "near t = 26.4 s. A scene matter (damping or a dissipative integrator).")
+def test_default_scene_3000_steps_without_a_retry():
+    rows = _default_run(3000, "auto")
+    assert len(rows) == 3000 and all(r["retries"] == 0 for r in rows)
+
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("hessian", ["abs", "trust_region_filter", "auto"])
 def test_mpi_equals_serial(tmp_path, hessian):
-    """The coarse default beam at dt = 0.05 s under ``mpirun -n 2``: the serial energies to
+    """The coarse default beam at dt = 0.05 s (6 steps) under ``mpirun -n 2``: the serial energies to
     1e-8. auto (exact here: MUMPS's inertia shows no negative pivot on either) takes the
     same iterations; abs and the trust-region filter converge linearly (the beam's tangent
     is indefinite at many points), so round-off may move their last iteration by one or two.
@@ -167,13 +211,13 @@ def test_mpi_equals_serial(tmp_path, hessian):
     for ranks, prefix in ((1, []), (2, mpirun)):
         out[ranks] = tmp_path / f"out{ranks}"
         r = subprocess.run(prefix + fem_anim_command() + [
-            "run", "-q", "-o", str(out[ranks]), "--set", "time.steps=12", "--set",
+            "run", "-q", "-o", str(out[ranks]), "--set", "time.steps=6", "--set",
             "mesh.element_size=0.1", "--set", "time.dt=0.05", "--set", "output.render=false",
             "--set", f'solver.hessian="{hessian}"'],
             capture_output=True, text=True, timeout=600, env=clean_environment())
         assert r.returncode == 0, r.stderr
     a, b = read_stats(out[1] / "stats.csv"), read_stats(out[2] / "stats.csv")
-    assert len(a) == len(b) == 12
+    assert len(a) == len(b) == 6
     slack = 0 if hessian == "auto" else 2
     for ra, rb in zip(a, b):
         assert rb["retries"] == ra["retries"] == 0
