@@ -38,7 +38,8 @@ compression, buckling, inverting elements), selected by ``solver.hessian``:
     factorisation (MUMPS, no extra cost when it is positive definite); a negative pivot
     makes that iteration use the trust-region filter's choice instead. Krylov presets
     have no inertia: CG's negative curvature (DIVERGED_INDEFINITE_MAT) or a failed line
-    search switch the rest of the step to the trust-region filter, from its last iterate.
+    search continue the step from its last iterate with abs, and with the exact Hessian
+    again where the trust-region filter would clamp (|rho - 1| < 0.01).
     Filtering changes only the quadrature points whose tangent is not positive definite
     (:func:`filter_tangent`).
 

@@ -67,6 +67,8 @@ HESSIAN_KINDS = ("exact", "shift", "clamp", "abs")
 #: CG met negative curvature (a failed linear solve), or the direction was no descent.
 _AUTO_RESTART = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
                  PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
+#: How often one step of ``auto`` may continue after such a failure.
+MAX_AUTO_RESTARTS = 4
 
 
 @dataclass
@@ -113,7 +115,8 @@ class Minimiser:
         self.hessian_its: Counter = Counter()  # this solve's iterations per kind of Hessian
         self._model = None  # (x_k, y_k, g_k, r.y, y^T H y) of the last direction, for rho
         self._auto_filtered = False  # auto: this step met an indefinite Hessian
-        self._auto_no_exact = False  # auto: ... in a Krylov solve: filtered to its end
+        self._auto_no_exact = False  # auto: ... shown by a failed Krylov solve or line search
+        self._auto_restarts = 0
         self._restarting = False
         self._last_iterate = None
         self._inertia = True  # whether the factorisation reports its inertia (auto)
@@ -166,6 +169,7 @@ class Minimiser:
         self.hessian_its = Counter()
         self._model = None
         self._auto_filtered = self._auto_no_exact = self._restarting = False
+        self._auto_restarts = 0
         g0 = self.objective(self.snes, x)
         newton_its = linear_its = 0
         while True:
@@ -176,9 +180,10 @@ class Minimiser:
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 self._at_objective_roundoff(x, g0)
             if self.mode == "auto" and reason in _AUTO_RESTART and not stalled and \
-                    not self._auto_no_exact and self._last_iterate is not None:
+                    self._auto_restarts < MAX_AUTO_RESTARTS and self._last_iterate is not None:
                 # the exact Hessian was indefinite where no inertia showed it: continue from
                 # the last iterate filtered (trust-region choice; the same stopping test)
+                self._auto_restarts += 1
                 self._auto_filtered = self._auto_no_exact = self._restarting = True
                 self._model = None
                 self._last_iterate.copy(x)
@@ -400,7 +405,10 @@ class Minimiser:
         factorisation every iteration assembles the exact Hessian first and reads the
         inertia of its factorisation (kept for the solve when it has no negative pivot).
         Krylov presets show an indefinite Hessian only by a failed solve or line search
-        (:meth:`solve`), after which the step continues filtered.
+        (:meth:`solve`), after which the step continues filtered: abs, or exact again
+        where the trust-region filter would clamp (the exact model is accurate there;
+        should CG fail again, the step continues filtered, at most
+        :data:`MAX_AUTO_RESTARTS` times).
         """
         rho = self._model_ratio(x)
         problem = self.problem
@@ -411,6 +419,8 @@ class Minimiser:
                 self._last_iterate = x.duplicate()
             x.copy(self._last_iterate)
             how = trust_region_choice(rho) if self._auto_no_exact else None
+            if how == "clamp" and self._auto_restarts < MAX_AUTO_RESTARTS:
+                how = None
         problem.set_hessian_filter(how)
         problem.jacobian(snes, x, A, P)
         if self.mode == "auto" and how is None and self._negative_pivots(A):
