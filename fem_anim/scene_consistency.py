@@ -140,9 +140,9 @@ def _check_regions(data: dict[str, Any]) -> None:
     models = {data["material"]["model"]} | {r["model"] for r in data["region"] if r["model"]}
     hessian = data["solver"]["hessian"]
     if len(models) > 1 and hessian in ("project", "abs", "trust_region_filter", "auto"):
-        raise SceneError(f"solver.hessian = \"{hessian}\" filters the tangent of one material "
-                         f"model per body; the regions use {', '.join(sorted(models))} (use "
-                         "\"shift\")")
+        raise SceneError(f"solver.hessian = \"{hessian}\" takes one material model per body (it "
+                         f"filters that model's tangent); the regions use "
+                         f"{', '.join(sorted(models))} (use \"shift\")")
 
 
 def _check_initial(data: dict[str, Any]) -> None:
