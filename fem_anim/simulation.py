@@ -334,7 +334,8 @@ class Simulation:
             "linear_its": solve.linear_its, "snes_reason": solve.reason,
             "residual_norm": solve.residual_norm, "newton_decrement": solve.newton_decrement,
             "shift": solve.shift,
-            **{f"{kind}_its": count for kind, count in solve.hessian_its.items()}, **energies, "assembly_s": solve.assembly_s,
+            **{f"{kind}_its": count for kind, count in solve.hessian_its.items()}, **energies,
+            "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,
             "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,
             "solve_wall_s": solve.wall_s, "step_wall_s": wall}

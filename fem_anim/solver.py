@@ -34,7 +34,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from .errors import ConvergenceError, FemAnimError
-from .hessian import RHO_TOLERANCE, ShiftStrategy, model_ratio, trust_region_choice
+from .hessian import ShiftStrategy, model_ratio, trust_region_choice
 from .petsc_options import DEFAULT_PREFIX, options_in_database
 from .problem import EVENTS
 

@@ -83,8 +83,7 @@ def test_filtered_modes_crush_the_cube_with_a_filtered_hessian_only(tmp_path, he
 
 def test_trust_region_filter_follows_rho_in_the_solver(tmp_path, monkeypatch):
     """Each iteration's filter is trust_region_choice(rho) of the previous step's rho."""
-    import fem_anim.solver as solver_module
-    from fem_anim.hessian import trust_region_choice
+    from fem_anim.hessian import RHO_TOLERANCE, trust_region_choice
 
     sim = squash(tmp_path, hessian="trust_region_filter", element_size=0.1)
     seen = []
@@ -107,7 +106,7 @@ def test_trust_region_filter_follows_rho_in_the_solver(tmp_path, monkeypatch):
     run_steps(sim, 2, 0.05)
     assert filters == [trust_region_choice(r) for r in seen]
     assert seen[0] is None and any(r is not None for r in seen)
-    assert solver_module.RHO_TOLERANCE == 0.01
+    assert RHO_TOLERANCE == 0.01
 
 
 def test_curvature_is_the_exact_second_derivative(tmp_path):
@@ -197,8 +196,8 @@ def test_default_scene_3000_steps_without_a_retry():
 @pytest.mark.mpi
 @pytest.mark.parametrize("hessian", ["abs", "trust_region_filter", "auto"])
 def test_mpi_equals_serial(tmp_path, hessian):
-    """The coarse default beam at dt = 0.05 s (6 steps) under ``mpirun -n 2``: the serial energies to
-    1e-8. auto (exact here: MUMPS's inertia shows no negative pivot on either) takes the
+    """The coarse default beam at dt = 0.05 s (6 steps) under ``mpirun -n 2``: the serial
+    energies to 1e-8. auto (exact here: MUMPS's inertia shows no negative pivot on either) takes the
     same iterations; abs and the trust-region filter converge linearly (the beam's tangent
     is indefinite at many points), so round-off may move their last iteration by one or two.
 
