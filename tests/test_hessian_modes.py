@@ -194,7 +194,7 @@ def test_default_scene_3000_steps_without_a_retry():
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("hessian", ["abs", "trust_region_filter", "auto"])
+@pytest.mark.parametrize("hessian", ["trust_region_filter", "auto"])  # the first: clamp and abs
 def test_mpi_equals_serial(tmp_path, hessian):
     """The coarse default beam at dt = 0.05 s (6 steps) under ``mpirun -n 2``: the serial
     energies to 1e-8. auto (exact here: MUMPS's inertia shows no negative pivot on either) takes the
@@ -228,4 +228,4 @@ def test_mpi_equals_serial(tmp_path, hessian):
     if hessian == "auto":
         assert all(r["exact_its"] == r["newton_its"] for r in a + b)
     else:
-        assert sum(r["abs_its"] for r in a) > 0
+        assert sum(r["abs_its"] for r in a) > 0 and sum(r["clamp_its"] for r in a) > 0
