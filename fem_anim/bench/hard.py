@@ -1,6 +1,6 @@
 """Hard steps: the ~60k-tetrahedron beam against plain Newton, and scenes x Hessian modes.
 
-    fem-anim bench --hard [--reduced] [--only SCENE,...] [--modes M,...] [-o TABLE.md]
+    fem-anim bench --hard [--reduced] [--only "PART;..."] [--modes M,...] [-o TABLE.md]
     python -m fem_anim.bench.hard --plain [SCENE] [--element-size H] [--preset P] [--out DIR]
 
 **Scenes x Hessian modes** (:func:`hessian_table`, ``fem-anim bench --hard``): each hard scene
@@ -235,7 +235,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("scene", nargs="?", help="--plain: the scene (default: the hanging beam)")
     p.add_argument("--plain", action="store_true", help="plain Newton against fem_anim (60k)")
     p.add_argument("--reduced", action="store_true", help="small variants (seconds)")
-    p.add_argument("--only", help="comma-separated parts of scene names to run")
+    p.add_argument("--only", help="parts of scene names to run, separated by ';' (names "
+                   "contain commas)")
     p.add_argument("--modes", default=",".join(HESSIAN_MODES), help="comma-separated modes")
     p.add_argument("--element-size", type=float, default=HARD_ELEMENT_SIZE)
     p.add_argument("--preset", default="cg-icc")
@@ -254,7 +255,7 @@ def main(argv: list[str] | None = None) -> int:
     rank0 = MPI.COMM_WORLD.rank == 0
     modes = tuple(args.modes.split(","))
     before = machine_description()
-    table, _ = hessian_table(args.reduced, args.only.split(",") if args.only else None, modes,
+    table, _ = hessian_table(args.reduced, args.only.split(";") if args.only else None, modes,
                              log=lambda line: rank0 and print(line, file=sys.stderr, flush=True))
     stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     command = " ".join(["fem-anim bench --hard", *(argv or [])])
