@@ -167,7 +167,7 @@ class Minimiser:
         factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
         self._clear_objective_cache()
         self.hessian_its = Counter()
-        self._model = None
+        self._drop_model()
         self._auto_filtered = self._auto_no_exact = self._restarting = False
         self._auto_restarts = 0
         g0 = self.objective(self.snes, x)
@@ -185,7 +185,7 @@ class Minimiser:
                 # the last iterate filtered (trust-region choice; the same stopping test)
                 self._auto_restarts += 1
                 self._auto_filtered = self._auto_no_exact = self._restarting = True
-                self._model = None
+                self._drop_model()
                 self._last_iterate.copy(x)
                 continue
             break
@@ -327,7 +327,7 @@ class Minimiser:
         """
         if not (self.mode == "trust_region_filter" or
                 (self.mode == "auto" and self._auto_filtered)):
-            self._model = None
+            self._drop_model()
             return
         g = self.objective(self.snes, x)
         slope = self.b.dot(y)
@@ -338,6 +338,12 @@ class Minimiser:
             x.copy(self._model[0])
             y.copy(self._model[1])
             self._model[2:] = [g, slope, curvature]
+
+    def _drop_model(self) -> None:
+        if self._model is not None:
+            self._model[0].destroy()
+            self._model[1].destroy()
+        self._model = None
 
     def _model_ratio(self, x: PETSc.Vec) -> float | None:
         """rho of the step that led to x from the recorded model (None without one)."""
@@ -350,9 +356,7 @@ class Minimiser:
         yy = y.dot(y)
         alpha = -p.dot(y) / yy if yy > 0.0 else 0.0
         p.destroy()
-        self._model[0].destroy()
-        self._model[1].destroy()
-        self._model = None
+        self._drop_model()
         return model_ratio(g_k - self.objective(self.snes, x), slope, curvature, alpha)
 
     def _contact_bound(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
@@ -580,9 +584,7 @@ class Minimiser:
         self._clear_objective_cache()
         if self._last_iterate is not None:
             self._last_iterate.destroy()
-        if self._model is not None:
-            self._model[0].destroy()
-            self._model[1].destroy()
+        self._drop_model()
         self.snes.destroy()
         self.A.destroy()
         self.b.destroy()
