@@ -34,8 +34,9 @@ __all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "Traject
            "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS"]
 
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
-                 "residual_norm", "initial_residual_norm", "newton_decrement", "shift", "kinetic",
-                 "elastic", "gravity", "contact", "total_energy", "assembly_s", "factor_s",
+                 "residual_norm", "initial_residual_norm", "newton_decrement", "shift",
+                 "exact_its", "shift_its", "clamp_its", "abs_its", "kinetic", "elastic",
+                 "gravity", "contact", "total_energy", "assembly_s", "factor_s",
                  "linear_solve_s", "other_s", "solve_wall_s", "step_wall_s", "contact_s",
                  "contact_pairs"]
 

@@ -58,8 +58,8 @@ from fem_anim.forms.mixed import MIXED_MATERIALS, compliance, lagrangian
 from . import compat
 from .body import body_pins, body_regions
 from .contact import ObstacleContact
+from .hessian import FILTERS, project_psd
 from .ipc_contact import IPCContact
-from .hessian import project_psd
 from .errors import SceneError
 from .mesh import SimplexMesh, cell_volumes
 from .mixed import MixedFields, SchurPreconditioner
@@ -67,7 +67,11 @@ from .pin import PinMotion
 from .quadrature import QuadratureData
 from .region import assign_materials, local_cell_markers
 
-__all__ = ["EVENTS", "EnergyProblem", "compile_forms", "default_quadrature_degree"]
+__all__ = ["EVENTS", "EnergyProblem", "FILTERED_MODES", "compile_forms",
+           "default_quadrature_degree"]
+
+#: ``solver.hessian`` modes that assemble the elastic Hessian from a filtered tangent.
+FILTERED_MODES = ("project", "abs", "trust_region_filter", "auto")
 
 JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-march=native"]}
 
@@ -234,16 +238,30 @@ class EnergyProblem:
         jacobian = ufl.derivative(residual, unknown, du)
         solver = scene["solver"]
         self.tangent_data = None
-        if solver["hessian"] == "project" and not self.scheme.explicit:
-            # the convex terms exactly, the elastic one projected (gravity is linear)
-            jacobian = ufl.derivative(ufl.derivative(convex, self.u, dv), self.u, du) + \
+        self.hessian_mode = solver["hessian"] if not self.scheme.explicit else "exact"
+        filtered = None
+        if self.hessian_mode in FILTERED_MODES:
+            # the convex terms exactly, the elastic one filtered (gravity is linear)
+            filtered = ufl.derivative(ufl.derivative(convex, self.u, dv), self.u, du) + \
                 self._projected_elastic_hessian(du, dv)
             if contact_terms is not None:  # exact: not a function of F
-                jacobian += self.weight * ufl.derivative(ufl.derivative(
+                filtered += self.weight * ufl.derivative(ufl.derivative(
                     contact_terms, self.u, dv), self.u, du)
         if self.contact is not None and \
                 (correction := self.contact.curvature_correction(du, dv)) is not None:
             jacobian += self.weight * correction  # sphere barriers: PSD-projected Hessian
+            if filtered is not None:
+                filtered += self.weight * correction
+        if self.hessian_mode in ("project", "abs", "trust_region_filter"):
+            jacobian, filtered = filtered, None  # the filtered Hessian is the only one
+        # y^T H y of the exact Hessian along a direction y (the trust-region ratio's model)
+        self.direction = None
+        if self.hessian_mode in ("trust_region_filter", "auto"):
+            self.direction = fem.Function(V, name="newton_direction")
+            ufl_forms["curvature"] = ufl.derivative(ufl.derivative(
+                objective, self.u, self.direction), self.u, self.direction)
+        if filtered is not None:
+            ufl_forms["jacobian_filtered"] = filtered
         self.filter_inversion = solver["inversion_filter"]
         if self.filter_inversion is None:
             self.filter_inversion = self.mixed or any(m.requires_positive_J
@@ -287,6 +305,12 @@ class EnergyProblem:
         self.objective_form = compiled["objective"]
         self.residual_form = compiled["residual"]
         self.jacobian_form = compiled["jacobian"]
+        self.jacobian_filtered_form = compiled.get("jacobian_filtered")
+        self.curvature_form = compiled.get("curvature")
+        self._active_jacobian = self.jacobian_form
+        self.hessian_filter = None  # the tangent's filter in use (None: exact)
+        if self.hessian_mode in ("project", "abs", "trust_region_filter"):
+            self.set_hessian_filter("clamp" if self.hessian_mode == "project" else "abs")
         self.mass_form = compiled["mass"]
         self.potential_gradient_form = compiled["potential_gradient"]
         self.damping_force_form = compiled.get("damping_force")
@@ -397,14 +421,15 @@ class EnergyProblem:
         return W * q * self.dx_elastic
 
     def _projected_elastic_hessian(self, du, dv):
-        """w int grad(v) : A+ : grad(du), A+ the PSD projection of d^2 psi/dF^2."""
+        """w int grad(v) : A+ : grad(du), A+ the filtered d^2 psi/dF^2 (clamp or abs, per
+        quadrature point: :func:`fem_anim.hessian.filter_tangent`)."""
         d = self.d
         Fv = ufl.variable(deformation_gradient(self.u))
         tangent = ufl.diff(ufl.diff(self._psi(self.u, Fv), Fv), Fv)
         flat = ufl.as_matrix([[tangent[i, j, k, m] for k in range(d) for m in range(d)]
                               for i in range(d) for j in range(d)])
         self.tangent_data = self._quadrature_data(
-            "projected_tangent", flat, project_psd, (d * d, d * d), (d * d, d * d))
+            "filtered_tangent", flat, project_psd, (d * d, d * d), (d * d, d * d))
         A = self.tangent_data.function  # row i*d + j, column k*d + m, like `flat`
 
         def flatten(G):
@@ -554,18 +579,46 @@ class EnergyProblem:
         EVENTS["residual"].end()
         self.assembly_s += time.perf_counter() - start
 
+    def set_hessian_filter(self, how: str | None) -> None:
+        """Assemble the next Hessians exact (``None``) or with the elastic tangent filtered
+        per quadrature point (``"clamp"`` or ``"abs"``: :func:`fem_anim.hessian.filter_tangent`).
+
+        Raises:
+            ValueError: a filter asked of a problem built without the filtered form.
+        """
+        if how is None:
+            if self.hessian_mode in ("project", "abs", "trust_region_filter"):
+                raise ValueError(f"solver.hessian = {self.hessian_mode!r} has no exact Hessian")
+            self._active_jacobian = self.jacobian_form
+        else:
+            if self.tangent_data is None:
+                raise ValueError(f"solver.hessian = {self.hessian_mode!r} has no filtered "
+                                 "Hessian")
+            self.tangent_data.evaluate = FILTERS[how]
+            self._active_jacobian = self.jacobian_filtered_form or self.jacobian_form
+        self.hessian_filter = how
+
+    def curvature(self, x: PETSc.Vec, y: PETSc.Vec) -> float:
+        """y^T H(x) y with H the exact (unfiltered) Hessian of g, summed over all ranks."""
+        self.set_state(x)
+        direction = compat.petsc_vec(self.direction)
+        y.copy(direction)
+        direction.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        return self.assemble_scalar(self.curvature_form)
+
     def jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
-        """Hessian of g at x (exact, or with the elastic part projected: ``solver.hessian``).
+        """Hessian of g at x (exact, or with the elastic part filtered: ``solver.hessian``,
+        :meth:`set_hessian_filter`).
 
         Line-search trials may have left another state in u, so x is set first.
         """
         start = time.perf_counter()
         EVENTS["jacobian"].begin()
         self.set_state(x)
-        if self.tangent_data is not None:
+        if self.hessian_filter is not None:
             self.tangent_data.update()
         A.zeroEntries()
-        fem_petsc.assemble_matrix(A, self.jacobian_form, self.bcs)
+        fem_petsc.assemble_matrix(A, self._active_jacobian, self.bcs)
         if self.ipc is not None:
             A.assemble(PETSc.Mat.AssemblyType.FLUSH)
             self.ipc.add_hessian(A, float(self.weight.value))

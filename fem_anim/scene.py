@@ -34,6 +34,7 @@ from typing import Any
 
 from .errors import SceneError
 from .errors import show_value as _show
+from .hessian import MODES as HESSIAN_MODES
 from .scene_consistency import check_consistency, check_render
 
 __all__ = ["Scene", "load_scene", "parse_override", "validate_render", "DEFAULTS", "SCHEMA",
@@ -325,7 +326,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "method": Key(str, "newton", _one_of(NONLINEAR_METHODS)),
         "stopping": Key(str, "norm", _one_of(("norm", "decrement"))),
         "decrement_tol": Key(NUM, 1e-14, _positive),
-        "hessian": Key(str, "exact", _one_of(("exact", "shift", "project"))),
+        "hessian": Key(str, "exact", _one_of(HESSIAN_MODES)),
         "forcing": Key(str, "tight", _one_of(("tight", "adaptive"))),
         "inversion_filter": Key(bool, None),
         "petsc": Key(dict, {}, _check_petsc),

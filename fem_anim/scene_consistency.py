@@ -177,6 +177,10 @@ def check_consistency(data: dict[str, Any]) -> None:
     if solver["hessian"] != "exact" and solver["method"] not in HESSIAN_METHODS:
         raise SceneError(f"solver.hessian = \"{solver['hessian']}\" modifies Newton's "
                          f"Hessian; solver.method = \"{solver['method']}\" uses none")
+    if solver["hessian"] == "trust_region_filter" and solver["method"] != "newton":
+        raise SceneError("solver.hessian = \"trust_region_filter\" chooses each iteration's "
+                         "filter from the line search's step; solver.method = "
+                         f"\"{solver['method']}\" has none (use \"newton\")")
     if solver["forcing"] != "tight" and solver["method"] not in HESSIAN_METHODS:
         raise SceneError(f"solver.forcing = {solver['forcing']!r} sets the Krylov tolerance of "
                          f"Newton's linear solves; solver.method = {solver['method']!r} has "
@@ -249,9 +253,11 @@ def _check_regions(data: dict[str, Any], prefix: str = "") -> None:
             raise SceneError(f"{where} sets no material key (give at least one of "
                              f"{', '.join(REGION_MATERIAL_KEYS)})")
     models = {data["material"]["model"]} | {r["model"] for r in data["region"] if r["model"]}
-    if len(models) > 1 and data["solver"]["hessian"] == "project":
-        raise SceneError("solver.hessian = \"project\" takes one material model per body; the "
-                         f"regions use {', '.join(sorted(models))} (use \"shift\")")
+    hessian = data["solver"]["hessian"]
+    if len(models) > 1 and hessian in ("project", "abs", "trust_region_filter", "auto"):
+        raise SceneError(f"solver.hessian = \"{hessian}\" takes one material model per body (it "
+                         f"filters that model's tangent); the regions use "
+                         f"{', '.join(sorted(models))} (use \"shift\")")
 
 
 def _check_initial(data: dict[str, Any], prefix: str = "") -> None:

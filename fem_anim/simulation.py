@@ -77,7 +77,7 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
     above = merge_options(flatten_options(scene["solver"]["petsc"]), cli_options or {})
     layer = drop_replaced(layer, above)
     method = NONLINEAR_METHODS[scene["solver"]["method"]]
-    if scene["solver"]["hessian"] == "shift":
+    if scene["solver"]["hessian"] in ("shift", "auto"):
         layer = layer | {"mat_mumps_icntl_13": "1"}  # exact inertia from MUMPS in parallel
     try:  # the scene checked the method; the preset may come from the command line
         forcing = forcing_options(scene["solver"]["forcing"], merge_options(layer, above))
@@ -464,8 +464,9 @@ class Simulation:
             "linear_its": solve.linear_its, "snes_reason": solve.reason,
             "residual_norm": solve.residual_norm,
             "initial_residual_norm": solve.initial_residual_norm,
-            "newton_decrement": solve.newton_decrement,
-            "shift": solve.shift, **energies, "assembly_s": solve.assembly_s,
+            "newton_decrement": solve.newton_decrement, "shift": solve.shift,
+            **{f"{kind}_its": count for kind, count in solve.hessian_its.items()}, **energies,
+            "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,
             "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,
             "solve_wall_s": solve.wall_s, "step_wall_s": wall, **self._contact_stats()}

@@ -1,8 +1,19 @@
-"""The full default run on a ~60k-tetrahedron beam: plain Newton against fem_anim's menu.
+"""Hard steps: the ~60k-tetrahedron beam against plain Newton, and scenes x Hessian modes.
 
-    python -m fem_anim.bench.hard [SCENE] [--element-size H] [--preset P] [--out DIR]
+    fem-anim bench --hard [--reduced] [--only "PART;..."] [--modes M,...] [-o TABLE.md]
+    python -m fem_anim.bench.hard --plain [SCENE] [--element-size H] [--preset P] [--out DIR]
 
-Each configuration is a complete ``fem-anim run`` (60 steps of dt = 1/60 s, Newmark) in its
+**Scenes x Hessian modes** (:func:`hessian_table`, ``fem-anim bench --hard``): each hard scene
+(:func:`hard_scenes`: the ~55k-tetrahedron hanging beam with cg-icc, the crushed cube in StVK
+and stable neo-Hookean, the bar stretched to 3x, the spinning body, nu = 0.4999 with P1 and
+P2, the default scene for 3000 steps) is run in this process with every ``solver.hessian``
+(exact, shift, project = clamp, abs, trust_region_filter, auto): Newton iterations (and how
+many used each kind of Hessian), adaptive retries, wall time of the stepping (mesh and JIT
+excluded), whether it finished and, if not, the message it stopped with. ``--reduced`` runs
+small variants (coarse meshes, few steps) in seconds: tests/test_hessian_modes.py runs it.
+
+**Plain Newton** (:func:`hard_run`, ``--plain``; ``fem-anim bench --perf --hard``): each
+configuration is a complete ``fem-anim run`` (60 steps of dt = 1/60 s, Newmark) in its
 own process. "Plain" is what DOLFINx + SNES gives without fem_anim's safeguards: full Newton
 steps (``-snes_linesearch_type basic``), no inversion filter, no adaptive dt; a variant keeps
 the backtracking line search on the objective but not the filter. fem_anim's configuration
@@ -14,14 +25,17 @@ stopped, Newton iterations, retries and wall time.
 from __future__ import annotations
 
 import csv
+import datetime
 import os
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CONFIGS", "hard_run", "run_case"]
+__all__ = ["CONFIGS", "HESSIAN_MODES", "HardScene", "hard_run", "hard_scenes", "hessian_table",
+           "run_case", "run_scene"]
 
 HARD_ELEMENT_SIZE = 0.015  # 55k tetrahedra on the default beam
 CONFIGS = (
@@ -85,18 +99,173 @@ def hard_run(scene_path, overrides, out: Path, log=print, h: float = HARD_ELEMEN
     return text
 
 
+#: ``solver.hessian`` values of the table, in its column order ("project" clamps).
+HESSIAN_MODES = ("exact", "shift", "project", "abs", "trust_region_filter", "auto")
+
+
+@dataclass
+class HardScene:
+    """One hard scene: its name, how to build it, the preset, and the frames to run."""
+
+    name: str
+    data: dict | None  # a scene dictionary (extremes.scene_text); None: the default scene
+    overrides: tuple[str, ...] = ()
+    preset: str | None = None
+    steps: int = 60
+
+
+def _crushed_cube(model: str, element_size: float) -> dict:
+    """tests/test_solver_menu.py's compression: a 0.2 m cube, E = 1e4 Pa, the press moves
+    5 cm per step of 0.05 s (implicit Euler) until it has crushed the cube to 15 %."""
+    return {"name": f"crushed_{model}",
+            "mesh": {"size": [0.2, 0.2, 0.2], "element_size": element_size},
+            "material": {"model": model, "youngs_modulus": 1e4, "poisson_ratio": 0.3},
+            "time": {"integrator": "implicit_euler", "dt": 0.05},
+            "pin": [{"name": "floor", "min": [-1.0, -1.0, -0.001], "max": [1.0, 1.0, 0.001]},
+                    {"name": "press", "min": [-1.0, -1.0, 0.199], "max": [1.0, 1.0, 0.201],
+                     "velocity": [0.0, 0.0, -1.0], "until": 0.17}],
+            "output": {"render": False}}
+
+
+def hard_scenes(reduced: bool = False) -> list[HardScene]:
+    """The scenes of the table (``reduced``: coarse, short variants that run in seconds)."""
+    from .extremes import cases
+
+    extreme = {case.name: case for case in cases(full=not reduced)}
+    out = []
+    if not reduced:
+        out.append(HardScene("hanging beam, 55k tets, cg-icc", None,
+                             (f"mesh.element_size={HARD_ELEMENT_SIZE}",), "cg-icc", 60))
+    size = 0.1 if reduced else 0.05
+    out += [HardScene("crushed cube, StVK", _crushed_cube("stvk", size), steps=4),
+            HardScene("crushed cube, stable neo-Hookean",
+                      _crushed_cube("stable_neohookean", size), steps=4)]
+    names = ["stretched to 3x length", "nu = 0.4999, P2"] if reduced else \
+        ["stretched to 3x length", "spinning body (half a turn in 1 s), neohookean",
+         "nu = 0.4999, P1", "nu = 0.4999, P2"]
+    for name in names:
+        case = extreme[name]
+        out.append(HardScene(name + (" (2D)" if reduced else ""), case.keys, steps=case.steps))
+    if not reduced:
+        out.append(HardScene("default scene, 3000 steps", None, (), None, 3000))
+    return out
+
+
+def _scene(hard: HardScene, mode: str):
+    from ..scene import load_scene
+    from .extremes import _load
+
+    sets = [f'solver.hessian="{mode}"', f"time.steps={hard.steps}", "output.render=false"]
+    if hard.data is None:
+        return load_scene(None, [*hard.overrides, *sets])
+    data = {k: (dict(v) if isinstance(v, dict) else v) for k, v in hard.data.items()}
+    data["solver"] = dict(data.get("solver", {}), hessian=mode)
+    data["time"] = dict(data["time"], steps=hard.steps)
+    return _load(data)
+
+
+def run_scene(hard: HardScene, mode: str, comm=None) -> dict:
+    """Run a hard scene with one Hessian mode to its end or its error (in this process).
+
+    Returns:
+        finished, t reached, Newton iterations (total and per kind of Hessian), retries,
+        the stepping's wall time (s) and the error message if it stopped.
+    """
+    from mpi4py import MPI
+
+    from ..errors import ConvergenceError
+    from ..simulation import AdaptiveStepper, Simulation
+    from ..solver import HESSIAN_KINDS
+
+    comm = comm or MPI.COMM_WORLD
+    scene = _scene(hard, mode)
+    sim = Simulation(scene, comm, {}, preset=hard.preset)
+    h = scene["time"]["dt"]
+    stepper = AdaptiveStepper(sim, h, scene["time"])
+    state = sim.initial_state()
+    rows, error = [], ""
+    start = time.perf_counter()
+    try:
+        for frame in range(1, hard.steps + 1):
+            for state, row in stepper.advance(state, frame * h):
+                rows.append(row)
+    except ConvergenceError as err:
+        error = str(err)
+    wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)
+    sim.minimiser.destroy()
+    return {"finished": not error, "t_end": state.time, "wall": wall, "error": error,
+            "newton_its": sum(r["newton_its"] for r in rows),
+            "retries": sum(r["retries"] for r in rows),
+            "by_kind": {k: sum(r[f"{k}_its"] for r in rows) for k in HESSIAN_KINDS}}
+
+
+def hessian_table(reduced: bool = False, only: list[str] | None = None,
+                  modes: tuple[str, ...] = HESSIAN_MODES, log=print) -> tuple[str, list]:
+    """Every hard scene with every Hessian mode; the markdown table and the raw results."""
+    from .report import md_table
+
+    results = []
+    body = []
+    for hard in hard_scenes(reduced):
+        if only and not any(o in hard.name for o in only):
+            continue
+        for mode in modes:
+            r = run_scene(hard, mode)
+            results.append((hard.name, mode, r))
+            kinds = "/".join(str(r["by_kind"][k]) for k in ("exact", "shift", "clamp", "abs"))
+            outcome = "finished" if r["finished"] else \
+                "stopped: " + r["error"].replace("|", "/")
+            log(f"hard: {hard.name}, {mode}: {outcome[:160]} ({r['newton_its']} Newton its, "
+                f"{r['retries']} retries, {r['wall']:.1f} s)")
+            body.append([hard.name, mode, "yes" if r["finished"] else "no", f"{r['t_end']:.4g}",
+                         r["newton_its"], kinds, r["retries"], f"{r['wall']:.1f}",
+                         "" if r["finished"] else outcome])
+    table = md_table(["scene", "solver.hessian", "finished", "t reached, s", "Newton its",
+                      "exact/shift/clamp/abs its", "retries", "wall s", "outcome"], body)
+    return table, results
+
+
 def main(argv: list[str] | None = None) -> int:
+    """``fem-anim bench --hard``: the scenes x Hessian modes table (``--plain``: the 60k runs)."""
     import argparse
 
-    p = argparse.ArgumentParser(prog="python -m fem_anim.bench.hard")
-    p.add_argument("scene", nargs="?")
+    from mpi4py import MPI
+
+    p = argparse.ArgumentParser(prog="fem-anim bench --hard")
+    p.add_argument("scene", nargs="?", help="--plain: the scene (default: the hanging beam)")
+    p.add_argument("--plain", action="store_true", help="plain Newton against fem_anim (60k)")
+    p.add_argument("--reduced", action="store_true", help="small variants (seconds)")
+    p.add_argument("--only", help="parts of scene names to run, separated by ';' (names "
+                   "contain commas)")
+    p.add_argument("--modes", default=",".join(HESSIAN_MODES), help="comma-separated modes")
     p.add_argument("--element-size", type=float, default=HARD_ELEMENT_SIZE)
     p.add_argument("--preset", default="cg-icc")
     p.add_argument("--out", default="demos/results")
+    p.add_argument("-o", "--output", help="also write the table to this markdown file")
     args = p.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    print(hard_run(args.scene, [], out, h=args.element_size, preset=args.preset))
+    if args.plain:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        print(hard_run(args.scene, [], out, h=args.element_size, preset=args.preset))
+        return 0
+    from ..console import quiet_jit_logging
+    from .trade import machine_description
+
+    quiet_jit_logging()
+    rank0 = MPI.COMM_WORLD.rank == 0
+    modes = tuple(args.modes.split(","))
+    before = machine_description()
+    table, _ = hessian_table(args.reduced, args.only.split(";") if args.only else None, modes,
+                             log=lambda line: rank0 and print(line, file=sys.stderr, flush=True))
+    stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    command = " ".join(["fem-anim bench --hard", *(argv or [])])
+    text = (f"Measured {stamp} on {before} at the start and load average "
+            f"{', '.join(f'{x:.2f}' for x in os.getloadavg())} at the end; `{command}`.\n\n"
+            + table)
+    if rank0:
+        print(text)
+        if args.output:
+            Path(args.output).write_text(text + "\n", encoding="utf-8")
     return 0
 
 

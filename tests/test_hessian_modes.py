@@ -1,0 +1,231 @@
+"""solver.hessian = abs, trust_region_filter and auto on scenes (issue 20).
+
+The crushed cube of tests/test_solver_menu.py (a soft StVK cube squeezed by a press moving
+5 cm per step: exact Newton fails at step 1), an easy scene where auto must be exact Newton
+iteration for iteration, the exact model behind the trust-region ratio checked by finite
+differences, the reduced hard-step bench, and ``mpirun -n 2`` against serial.
+"""
+
+from __future__ import annotations
+
+import subprocess
+
+import numpy as np
+import pytest
+from conftest import clean_environment, fem_anim_command, mpirun_command
+from mpi4py import MPI
+from test_cli import read_stats
+from test_solver_menu import run_steps, squash
+
+from fem_anim.errors import ConvergenceError
+from fem_anim.scene import load_scene
+from fem_anim.simulation import Simulation
+from fem_anim.solver import HESSIAN_KINDS
+
+
+def _kinds(stats) -> dict:
+    return {k: v for k, v in stats.hessian_its.items() if v}
+
+
+def test_auto_is_exact_newton_on_an_easy_scene():
+    """The default beam (coarse, 12 steps): auto takes exact Newton's iterations, step by
+    step, to the same displacements; every iteration used the exact Hessian."""
+    results = {}
+    for mode in ("exact", "auto"):
+        scene = load_scene(None, ["mesh.element_size=0.1", "time.steps=12",
+                                  f'solver.hessian="{mode}"'])
+        sim = Simulation(scene, MPI.COMM_WORLD)
+        state = sim.initial_state()
+        its = []
+        for _ in range(12):
+            state, stats = sim.step(state, scene["time"]["dt"])
+            its.append(stats.newton_its)
+            assert _kinds(stats) == {"exact": stats.newton_its}
+        results[mode] = (its, state.u)
+    assert results["auto"][0] == results["exact"][0]
+    np.testing.assert_array_equal(results["auto"][1], results["exact"][1])
+
+
+def test_auto_converges_on_the_crushed_cube_where_exact_fails(tmp_path):
+    with pytest.raises(ConvergenceError, match="step 1 .*did not converge"):
+        run_steps(squash(tmp_path, hessian="exact"), 4, 0.05)
+    sim = squash(tmp_path, hessian="auto")
+    state = sim.initial_state()
+    counts = dict.fromkeys(HESSIAN_KINDS, 0)
+    total = 0
+    for _ in range(4):
+        state, stats = sim.step(state, 0.05)
+        assert stats.reason > 0
+        total += stats.newton_its
+        for kind, n in stats.hessian_its.items():
+            counts[kind] += n
+    press = state.u.reshape(-1, 3)[sim.problem.moving_pins[0].dofs, 2]
+    assert press == pytest.approx(-0.17)
+    # exact wherever the Hessian was positive definite, filtered only where it was not
+    assert counts["exact"] > 0 and counts["abs"] + counts["clamp"] > 0
+    assert counts["shift"] == 0
+    # measured: 29 (shift: 29, project: 83)
+    assert total <= 40, counts
+
+
+@pytest.mark.parametrize("hessian", ["abs", "trust_region_filter"])
+def test_filtered_modes_crush_the_cube_with_a_filtered_hessian_only(tmp_path, hessian):
+    sim = squash(tmp_path, hessian=hessian, element_size=0.1)
+    state = sim.initial_state()
+    seen = set()
+    for _ in range(4):
+        state, stats = sim.step(state, 0.05)
+        seen |= set(_kinds(stats))
+    assert seen <= {"abs", "clamp"}
+    if hessian == "trust_region_filter":
+        assert seen == {"abs", "clamp"}  # far from the minimiser abs, near it clamp
+
+
+def test_trust_region_filter_follows_rho_in_the_solver(tmp_path, monkeypatch):
+    """Each iteration's filter is trust_region_choice(rho) of the previous step's rho."""
+    from fem_anim.hessian import RHO_TOLERANCE, trust_region_choice
+
+    sim = squash(tmp_path, hessian="trust_region_filter", element_size=0.1)
+    seen = []
+    ratio = sim.minimiser._model_ratio
+
+    def record(x):
+        rho = ratio(x)
+        seen.append(rho)
+        return rho
+
+    monkeypatch.setattr(sim.minimiser, "_model_ratio", record)
+    filters = []
+    original = sim.problem.set_hessian_filter
+
+    def spy(how):
+        filters.append(how)
+        original(how)
+
+    monkeypatch.setattr(sim.problem, "set_hessian_filter", spy)
+    run_steps(sim, 2, 0.05)
+    assert filters == [trust_region_choice(r) for r in seen]
+    assert seen[0] is None and any(r is not None for r in seen)
+    assert RHO_TOLERANCE == 0.01
+
+
+def test_curvature_is_the_exact_second_derivative(tmp_path):
+    """y^T H y of the curvature form equals a central difference of grad g . y."""
+    sim = squash(tmp_path, hessian="trust_region_filter", element_size=0.1)
+    state, _ = run_steps(sim, 2, 0.05)  # a compressed state: the tangent is indefinite
+    p = sim.problem
+    x = p.x_work.copy()
+    y = x.duplicate()
+    rng = np.random.default_rng(0)
+    values = rng.standard_normal(y.array.size).reshape(-1, 3) * 1e-3
+    z = p.V.tabulate_dof_coordinates()[: values.shape[0], 2]
+    values[(z < 0.002) | (z > 0.198)] = 0.0  # the floor and the press stay (as in Newton)
+    y.array[:] = values.ravel()
+    curvature = p.curvature(x, y)
+    r_plus, r_minus = x.duplicate(), x.duplicate()
+    eps = 1e-4
+    xp, xm = x.copy(), x.copy()
+    xp.axpy(eps, y)
+    xm.axpy(-eps, y)
+    p.residual(None, xp, r_plus)
+    p.residual(None, xm, r_minus)
+    r_plus.axpy(-1.0, r_minus)
+    fd = r_plus.dot(y) / (2 * eps)
+    assert curvature == pytest.approx(fd, rel=1e-6)
+
+
+def test_reduced_hard_bench_table():
+    """``fem-anim bench --hard --reduced`` on the crushed StVK cube: auto finishes without a
+    retry in fewer iterations than clamping; exact needs retries."""
+    from fem_anim.bench.hard import hessian_table
+
+    table, results = hessian_table(reduced=True, only=["StVK"],
+                                   modes=("exact", "project", "auto"), log=lambda line: None)
+    by_mode = {mode: r for _, mode, r in results}
+    assert by_mode["auto"]["finished"] and by_mode["auto"]["retries"] == 0
+    assert by_mode["exact"]["retries"] > 0 or not by_mode["exact"]["finished"]
+    assert by_mode["auto"]["newton_its"] < by_mode["project"]["newton_its"]
+    assert sum(by_mode["auto"]["by_kind"].values()) >= by_mode["auto"]["newton_its"]
+    assert "| crushed cube, StVK | auto | yes |" in table
+
+
+def _default_run(frames: int, hessian: str) -> list[dict]:
+    """The default scene for ``frames`` frames (adaptive stepper): its stats rows."""
+    from fem_anim.simulation import AdaptiveStepper
+
+    scene = load_scene(None, [f"time.steps={frames}", f'solver.hessian="{hessian}"'])
+    sim = Simulation(scene, MPI.COMM_WORLD)
+    h = scene["time"]["dt"]
+    stepper = AdaptiveStepper(sim, h, scene["time"])
+    state = sim.initial_state()
+    rows = []
+    for frame in range(1, frames + 1):
+        for state, row in stepper.advance(state, frame * h):
+            rows.append(row)
+    return rows
+
+
+def test_default_scene_through_its_first_indefinite_hessians():
+    """The default scene to t = 5.6 s: exact Newton needs its first retries at t = 5.4 s
+    (an indefinite Hessian: the line search fails on a non-descent direction); auto filters
+    those iterations (MUMPS's inertia shows them) and takes every step at the full dt."""
+    rows = _default_run(336, "auto")
+    assert len(rows) == 336 and all(r["retries"] == 0 for r in rows)
+    filtered = [r["time"] for r in rows if r["abs_its"] + r["clamp_its"] > 0]
+    assert any(5.35 < t < 5.6 for t in filtered), filtered  # the regime was reached
+    # measured: the first filtered iteration at t = 3.93 s; most steps exact
+    assert sum(r["exact_its"] for r in rows) > 0.9 * sum(r["newton_its"] for r in rows)
+
+
+@pytest.mark.slow
+def test_default_scene_20_seconds_without_a_retry():
+    """1200 frames (20 s; exact Newton: 19 retries by then): auto, no retry."""
+    rows = _default_run(1200, "auto")
+    assert len(rows) == 1200 and all(r["retries"] == 0 for r in rows)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="from t ~ 21 s Newmark's energy grows without bound "
+                   "(every Hessian mode; dt/2 slows it 8x): the run stops at time.min_dt "
+                   "near t = 26.4 s. A scene matter (damping or a dissipative integrator).")
+def test_default_scene_3000_steps_without_a_retry():
+    rows = _default_run(3000, "auto")
+    assert len(rows) == 3000 and all(r["retries"] == 0 for r in rows)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("hessian", ["trust_region_filter", "auto"])  # the first: clamp and abs
+def test_mpi_equals_serial(tmp_path, hessian):
+    """The coarse default beam at dt = 0.05 s (6 steps) under ``mpirun -n 2``: the serial
+    energies to 1e-8. auto (exact here: MUMPS's inertia shows no negative pivot on either) takes the
+    same iterations; abs and the trust-region filter converge linearly (the beam's tangent
+    is indefinite at many points), so round-off may move their last iteration by one or two.
+
+    (The crushed cube itself fails under MPI with every mode, exact included: reported.)
+    """
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    out = {}
+    for ranks, prefix in ((1, []), (2, mpirun)):
+        out[ranks] = tmp_path / f"out{ranks}"
+        r = subprocess.run(prefix + fem_anim_command() + [
+            "run", "-q", "-o", str(out[ranks]), "--set", "time.steps=6", "--set",
+            "mesh.element_size=0.1", "--set", "time.dt=0.05", "--set", "output.render=false",
+            "--set", f'solver.hessian="{hessian}"'],
+            capture_output=True, text=True, timeout=600, env=clean_environment())
+        assert r.returncode == 0, r.stderr
+    a, b = read_stats(out[1] / "stats.csv"), read_stats(out[2] / "stats.csv")
+    assert len(a) == len(b) == 6
+    slack = 0 if hessian == "auto" else 2
+    for ra, rb in zip(a, b):
+        assert rb["retries"] == ra["retries"] == 0
+        assert abs(rb["newton_its"] - ra["newton_its"]) <= slack, ra["step"]
+        for key in HESSIAN_KINDS:
+            assert (rb[f"{key}_its"] > 0) == (ra[f"{key}_its"] > 0), (ra["step"], key)
+        for key in ("kinetic", "elastic", "gravity"):
+            assert rb[key] == pytest.approx(ra[key], rel=1e-8), (ra["step"], key)
+    if hessian == "auto":
+        assert all(r["exact_its"] == r["newton_its"] for r in a + b)
+    else:
+        assert sum(r["abs_its"] for r in a) > 0 and sum(r["clamp_its"] for r in a) > 0
