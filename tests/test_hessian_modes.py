@@ -47,7 +47,9 @@ def test_auto_is_exact_newton_on_an_easy_scene():
 
 
 def test_auto_converges_on_the_crushed_cube_where_exact_fails(tmp_path):
-    with pytest.raises(ConvergenceError, match="step 1 .*did not converge"):
+    # step 1 or 2 (as in test_solver_menu): where exact Newton's line search first fails
+    # depends on MUMPS's pivoting options and on the mesher's cube
+    with pytest.raises(ConvergenceError, match="step [12] .*did not converge"):
         run_steps(squash(tmp_path, hessian="exact"), 4, 0.05)
     sim = squash(tmp_path, hessian="auto")
     state = sim.initial_state()
