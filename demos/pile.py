@@ -33,11 +33,11 @@
 import os
 from pathlib import Path
 
-import ipctk
 import meshio
 import numpy as np
 from mpi4py import MPI
 
+from fem_anim.intersection import crossed_frames
 from fem_anim.scene import load_scene
 from fem_anim.simulation import Simulation
 
@@ -69,18 +69,7 @@ if MPI.COMM_WORLD.rank == 0:
     with meshio.xdmf.TimeSeriesReader(str(OUT / "trajectory.xdmf")) as reader:
         points, blocks = reader.read_points_cells()
         frames = [reader.read_data(k)[1]["displacement"] for k in range(reader.num_steps)]
-    tets = blocks[0].data
-    faces = np.sort(tets[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3), axis=1)
-    unique, counts = np.unique(faces, axis=0, return_counts=True)
-    F = unique[counts == 1]
-    used = np.unique(F)
-    index = np.full(points.shape[0], -1)
-    index[used] = np.arange(used.size)
-    F = np.asfortranarray(index[F], dtype=np.int32)
-    surface = ipctk.CollisionMesh(np.asfortranarray(points[used]),
-                                  np.asfortranarray(ipctk.edges(F), dtype=np.int32), F)
-    crossed = [k for k, u in enumerate(frames)
-               if ipctk.has_intersections(surface, np.asfortranarray(points[used] + u[used]))]
+    crossed = crossed_frames(points, blocks[0].data, frames)
     lowest = min((points[:, 2] + u[:, 2]).min() for u in frames)
     pairs = [r["contact_pairs"] for r in rows]
     kinetic = np.array([r["kinetic"] for r in rows])
