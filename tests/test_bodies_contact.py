@@ -457,32 +457,21 @@ def test_interrupted_contact_run_resumes_to_the_same_run(tmp_path):
     kept)."""
     import csv
     import signal
-    import subprocess
-    import time
 
-    from conftest import clean_environment, fem_anim_command
+    from test_safety import checkpoint_meta, fem_anim, start, wait_for_rows
 
     path = scene_file(tmp_path, 14)
     args = ["run", "-q", "--set", "output.render=false", "--set", "output.checkpoint_every=100",
             str(path)]
     assert main(args + ["-o", str(tmp_path / "whole")]) == 0
     out = tmp_path / "cut"
-    proc = subprocess.Popen(fem_anim_command() + args + ["-o", str(out)],
-                            env=clean_environment(), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    stats = out / ".partial" / "stats.csv"
-    deadline = time.time() + 300
-    while not (stats.exists() and len(stats.read_text().splitlines()) > 7):
-        assert proc.poll() is None and time.time() < deadline, proc.communicate()
-        time.sleep(0.01)
+    proc = start(args + ["-o", str(out)])
+    wait_for_rows(out, 7, proc, timeout=300)
     proc.send_signal(signal.SIGINT)
     proc.communicate(timeout=300)
-    assert proc.returncode != 0 and (out / ".partial" / "checkpoint.npz").is_file()
-    with np.load(out / ".partial" / "checkpoint.npz") as npz:
-        kept = json.loads(npz["meta"].tobytes().decode())["contact"]
-    assert kept["kappa_floor"] > 0.0
-    done = subprocess.run(fem_anim_command() + args + ["--resume", str(out)],
-                          env=clean_environment(), capture_output=True, text=True, timeout=600)
+    assert proc.returncode != 0
+    assert checkpoint_meta(out / ".partial" / "checkpoint.npz")["contact"]["kappa_floor"] > 0.0
+    done = fem_anim(args + ["--resume", str(out)], timeout=600)
     assert done.returncode == 0, done.stderr
 
     def rows(where):
