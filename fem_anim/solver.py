@@ -38,14 +38,13 @@ it). The inversion filter works as for a minimisation (it looks at the step, not
 from __future__ import annotations
 
 import time
-from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
 from petsc4py import PETSc
 
 from .errors import ConvergenceError, FemAnimError
-from .hessian import ShiftStrategy, model_ratio, trust_region_choice
+from .newton_hessian import HESSIAN_KINDS, HessianChoice
 from .petsc_options import DEFAULT_PREFIX, options_in_database, unused_options
 from .problem import EVENTS
 
@@ -84,15 +83,6 @@ SADDLE_FLOOR = 1e-6
 POLISH_FAILED_REASON = 6
 #: Reasons of a step that met its stopping test.
 CONVERGED_REASONS = (2, 3, DECREMENT_REASON)
-#: The Hessians a Newton iteration may use (counted per step in :attr:`SolveStats.hessian_its`):
-#: exact, exact + c I with c > 0, elastic tangent clamped, elastic tangent abs-filtered.
-HESSIAN_KINDS = ("exact", "shift", "clamp", "abs")
-#: SNES reasons after which ``hessian = "auto"`` continues the step with the filtered Hessian:
-#: CG met negative curvature (a failed linear solve), or the direction was no descent.
-_AUTO_RESTART = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
-                 PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
-#: How often one step of ``auto`` may continue after such a failure.
-MAX_AUTO_RESTARTS = 4
 
 
 @dataclass
@@ -138,16 +128,7 @@ class Minimiser:
         self.prefix = prefix
         self.stopping = settings.get("stopping", "norm")
         self.decrement_tol = settings.get("decrement_tol", 0.0)
-        self.mode = settings.get("hessian", "exact")
-        self.shift = ShiftStrategy() if self.mode == "shift" else None
-        self.hessian_its: Counter = Counter()  # this solve's iterations per kind of Hessian
-        self._model = None  # (x_k, y_k, g_k, r.y, y^T H y) of the last direction, for rho
-        self._auto_filtered = False  # auto: this step met an indefinite Hessian
-        self._auto_no_exact = False  # auto: ... shown by a failed Krylov solve or line search
-        self._auto_restarts = 0
-        self._restarting = False
-        self._last_iterate = None
-        self._inertia = True  # whether the factorisation reports its inertia (auto)
+        self._restarting = False  # auto continues a failed solve (HessianChoice.restart)
         # -mat_type (aij, baij) picks the Hessian's storage; PETSc never reads it for a
         # matrix the application creates, so it is taken here
         mat_type = options.get("mat_type") or None
@@ -162,7 +143,9 @@ class Minimiser:
         if not self.saddle:
             snes.setObjective(self.objective)
         snes.setFunction(problem.residual, self.b)
-        snes.setJacobian(self._jacobian, self.A)
+        self.hessian = HessianChoice(settings.get("hessian", "exact"), problem, snes,
+                                     self.objective, self.b)
+        snes.setJacobian(self.hessian.jacobian, self.A)
         snes.setConvergenceTest(self._converged)
         self._history: list[tuple[float, float]] = []
         self._decrements: list[float] = []
@@ -190,8 +173,13 @@ class Minimiser:
         pc = snes.getKSP().getPC()
         if pc.getType() == "fieldsplit" and hasattr(problem, "configure_preconditioner"):
             problem.configure_preconditioner(pc)
-        if self.mode == "auto":
-            self._enable_inertia()
+        if self.hessian.mode == "auto":
+            self.hessian.enable_inertia(self.A)
+
+    @property
+    def shift(self):
+        """The Hessian shift's state (``solver.hessian = "shift"``), else None."""
+        return self.hessian.shift
 
     def require_read(self, names) -> None:
         """Make the first :meth:`solve` fail if one of the options ``names`` (the command
@@ -222,10 +210,8 @@ class Minimiser:
         assembly0 = self.problem.assembly_s
         factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
         self._clear_objective_cache()
-        self.hessian_its = Counter()
-        self._drop_model()
-        self._auto_filtered = self._auto_no_exact = self._restarting = False
-        self._auto_restarts = 0
+        self.hessian.start_step()
+        self._restarting = False
         g0 = self.objective(self.snes, x)
         newton_its = linear_its = 0
         while True:
@@ -235,18 +221,13 @@ class Minimiser:
             linear_its += self.snes.getLinearSolveIterations()
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)
-            if self.mode == "auto" and reason in _AUTO_RESTART and not stalled and \
-                    self._auto_restarts < MAX_AUTO_RESTARTS and self._last_iterate is not None:
+            if self.hessian.restart(reason, stalled, x):
                 # the exact Hessian was indefinite where no inertia showed it: continue from
                 # the last iterate filtered (trust-region choice; the same stopping test)
-                self._auto_restarts += 1
-                self._auto_filtered = self._auto_no_exact = self._restarting = True
-                self._drop_model()
-                self._last_iterate.copy(x)
+                self._restarting = True
                 continue
             break
-        if self.mode == "auto":
-            self.problem.set_hessian_filter(None)  # the next step starts exact
+        self.hessian.end_step()
         norm = self.snes.getFunctionNorm()
         if reason == ROUNDOFF_REASON or stalled:
             reason, norm = self._polish(x)
@@ -259,7 +240,7 @@ class Minimiser:
             assembly_s=self.problem.assembly_s - assembly0, factor_s=factor1 - factor0,
             linear_solve_s=solve1 - solve0,
             initial_residual_norm=self._history[0][0] if self._history else float("nan"),
-            hessian_its={kind: self.hessian_its[kind] for kind in HESSIAN_KINDS})
+            hessian_its=self.hessian.counts())
         if reason <= 0:
             ksp_reason = self.snes.getKSP().getConvergedReason()
             raise ConvergenceError(
@@ -360,7 +341,7 @@ class Minimiser:
         scaled = self._contact_bound(x, y)
         if self.problem.filter_inversion:
             scaled = self._filter_inverting(x, y) or scaled
-        self._record_model(x, y)
+        self.hessian.record_model(x, y)
         return scaled
 
     def _filter_inverting(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
@@ -381,182 +362,10 @@ class Minimiser:
             self.problem.set_state(x)
             EVENTS["filter"].end()
 
-    def _record_model(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
-        """Keep the exact quadratic model of g at x along y for the next iteration's rho.
-
-        Needed by the trust-region filter, and by ``auto`` once a step has switched to
-        the filtered Hessian: g(x), r.y and y^T H y with H unprojected
-        (:meth:`fem_anim.problem.EnergyProblem.curvature`).
-        """
-        if not (self.mode == "trust_region_filter" or
-                (self.mode == "auto" and self._auto_filtered)):
-            self._drop_model()
-            return
-        g = self.objective(self.snes, x)
-        slope = self.b.dot(y)
-        curvature = self.problem.curvature(x, y)
-        if self._model is None:
-            self._model = [x.copy(), y.copy(), g, slope, curvature]
-        else:
-            x.copy(self._model[0])
-            y.copy(self._model[1])
-            self._model[2:] = [g, slope, curvature]
-
-    def _drop_model(self) -> None:
-        if self._model is not None:
-            self._model[0].destroy()
-            self._model[1].destroy()
-        self._model = None
-
-    def _model_ratio(self, x: PETSc.Vec) -> float | None:
-        """rho of the step that led to x from the recorded model (None without one)."""
-        if self._model is None:
-            return None
-        x_k, y, g_k, slope, curvature = self._model
-        p = x.duplicate()
-        x.copy(p)
-        p.axpy(-1.0, x_k)  # p = x_{k+1} - x_k = -alpha y
-        yy = y.dot(y)
-        alpha = -p.dot(y) / yy if yy > 0.0 else 0.0
-        p.destroy()
-        self._drop_model()
-        return model_ratio(g_k - self.objective(self.snes, x), slope, curvature, alpha)
-
     def _contact_bound(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
         """Scale y so that no contact point of x - alpha y, 0 < alpha <= 1, nears an obstacle
         by more than :data:`fem_anim.contact.KEEP_FRACTION` of its distance; whether it did."""
         return _bound_step(self.problem, x, y) < 1.0
-
-    def _jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
-        """The problem's Hessian, shifted by c I until it is positive definite if asked.
-
-        Positive definiteness is read off the factorisation: the inertia of MUMPS's or
-        PETSc's Cholesky (negative pivots), or a PETSc factorisation failure; for a
-        Krylov preset CG is run on the shifted matrix and must not meet negative
-        curvature. c starts from the last successful shift, quartered (hessian.py).
-        """
-        if self.mode in ("trust_region_filter", "auto"):
-            self._filtered_jacobian(snes, x, A, P)
-            return
-        self.problem.jacobian(snes, x, A, P)
-        if self.shift is None:
-            self.hessian_its[{"project": "clamp", "abs": "abs"}.get(self.mode, "exact")] += 1
-            return
-        scale = A.getDiagonal().norm(PETSc.NormType.INFINITY)
-        c = self.shift.first(scale)
-        if c > 0.0:
-            A.shift(c)
-        while not self._positive_definite(A):
-            previous = c
-            c = self.shift.raise_shift(scale)
-            A.shift(c - previous)
-            if c > 1e12 * max(scale, 1.0):
-                raise ConvergenceError("the Hessian shift grew beyond 1e12 x its diagonal: the "
-                                       "linear solver never reported a positive definite matrix")
-        self.hessian_its["shift" if c > 0.0 else "exact"] += 1
-        self.shift.succeeded()
-
-    def _filtered_jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
-        """The Hessian of ``trust_region_filter`` and ``auto`` (:mod:`fem_anim.hessian`).
-
-        trust_region_filter: clamp if the exact model predicted the last step's decrease
-        to 1 % (|rho - 1| < 0.01), else abs. auto: the exact Hessian whenever it is
-        positive definite; else the trust-region filter's choice. With a Cholesky
-        factorisation every iteration assembles the exact Hessian first and reads the
-        inertia of its factorisation (kept for the solve when it has no negative pivot).
-        Krylov presets show an indefinite Hessian only by a failed solve or line search
-        (:meth:`solve`), after which the step continues filtered: abs, or exact again
-        where the trust-region filter would clamp (the exact model is accurate there;
-        should CG fail again, the step continues filtered, at most
-        :data:`MAX_AUTO_RESTARTS` times).
-        """
-        rho = self._model_ratio(x)
-        problem = self.problem
-        if self.mode == "trust_region_filter":
-            how = trust_region_choice(rho)
-        else:
-            if self._last_iterate is None:
-                self._last_iterate = x.duplicate()
-            x.copy(self._last_iterate)
-            how = trust_region_choice(rho) if self._auto_no_exact else None
-            if how == "clamp" and self._auto_restarts < MAX_AUTO_RESTARTS:
-                how = None
-        problem.set_hessian_filter(how)
-        problem.jacobian(snes, x, A, P)
-        if self.mode == "auto" and how is None and self._negative_pivots(A):
-            self._auto_filtered = True
-            how = trust_region_choice(rho)
-            problem.set_hessian_filter(how)
-            problem.jacobian(snes, x, A, P)
-        self.hessian_its[how or "exact"] += 1
-
-    def _enable_inertia(self) -> None:
-        """Ask MUMPS's Cholesky for the inertia of its factors (``auto``).
-
-        PETSc 3.18's MatGetInertia for MUMPS answers only with null-pivot detection
-        (ICNTL(24) = 1), and MUMPS reads its ``-mat_mumps_*`` options when it first
-        factorises, after the solver options have left PETSc's database
-        (:func:`fem_anim.petsc_options.options_in_database`): the controls are set on
-        the factor matrix itself, before its first factorisation.
-        """
-        ksp = self.snes.getKSP()
-        pc = ksp.getPC()
-        if pc.getType() != "cholesky" or pc.getFactorSolverType() != "mumps":
-            return
-        ksp.setOperators(self.A, self.A)
-        pc.setFactorSetUpSolverType()
-        factor = pc.getFactorMatrix()
-        factor.setMumpsIcntl(24, 1)  # null pivot detection: MatGetInertia answers
-        factor.setMumpsIcntl(13, 1)  # the inertia of the whole matrix under MPI
-
-    def _negative_pivots(self, A: PETSc.Mat) -> bool:
-        """Whether the Cholesky factorisation of A (kept for the solve) has a negative pivot.
-
-        False for solvers that report no inertia (Krylov presets, LU): ``auto`` then learns
-        of an indefinite Hessian from the failed solve or line search instead.
-        """
-        ksp = self.snes.getKSP()
-        pc = ksp.getPC()
-        if not self._inertia or pc.getType() != "cholesky":
-            return False
-        ksp.setOperators(A, A)
-        PETSc.Sys.pushErrorHandler("ignore")
-        try:
-            pc.setUp()
-            negative, _, _ = pc.getFactorMatrix().getInertia()
-        except PETSc.Error:
-            self._inertia = False  # this factorisation reports no inertia
-            return False
-        finally:
-            PETSc.Sys.popErrorHandler()
-        return negative > 0
-
-    def _positive_definite(self, A: PETSc.Mat) -> bool:
-        ksp = self.snes.getKSP()
-        ksp.setOperators(A, A)
-        pc = ksp.getPC()
-        if pc.getType() in ("cholesky", "lu"):
-            PETSc.Sys.pushErrorHandler("ignore")
-            try:
-                pc.setUp()
-                negative, _, _ = pc.getFactorMatrix().getInertia()
-                return negative == 0
-            except PETSc.Error:
-                pass  # this factorisation reports no inertia: ask CG instead
-            finally:
-                PETSc.Sys.popErrorHandler()
-        probe = PETSc.KSP().create(A.getComm())
-        probe.setOperators(A, A)
-        probe.setType("cg")
-        probe.getPC().setType("jacobi")
-        probe.setTolerances(rtol=1e-6, max_it=200)
-        b, z = A.createVecs()
-        b.setRandom()
-        probe.solve(b, z)
-        indefinite = probe.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
-        for obj in (probe, b, z):
-            obj.destroy()
-        return not indefinite
 
     def _at_objective_roundoff(self, x: PETSc.Vec, g0: float) -> bool:
         """Whether Newton cannot decrease g any further in floating point.
@@ -639,9 +448,7 @@ class Minimiser:
 
     def destroy(self) -> None:
         self._clear_objective_cache()
-        if self._last_iterate is not None:
-            self._last_iterate.destroy()
-        self._drop_model()
+        self.hessian.destroy()
         self.snes.destroy()
         self.A.destroy()
         self.b.destroy()

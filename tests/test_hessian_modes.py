@@ -89,14 +89,14 @@ def test_trust_region_filter_follows_rho_in_the_solver(tmp_path, monkeypatch):
 
     sim = squash(tmp_path, hessian="trust_region_filter", element_size=0.1)
     seen = []
-    ratio = sim.minimiser._model_ratio
+    ratio = sim.minimiser.hessian._model_ratio
 
     def record(x):
         rho = ratio(x)
         seen.append(rho)
         return rho
 
-    monkeypatch.setattr(sim.minimiser, "_model_ratio", record)
+    monkeypatch.setattr(sim.minimiser.hessian, "_model_ratio", record)
     filters = []
     original = sim.problem.set_hessian_filter
 

@@ -1,0 +1,278 @@
+"""Which Hessian each Newton iteration uses: ``solver.hessian`` (seed section 3.2.2, note 4).
+
+The remedies themselves (the shift's schedule, the per-point eigenvalue filters, the
+trust-region ratio) are in :mod:`fem_anim.hessian`; this module is the state a
+:class:`~fem_anim.solver.Minimiser` keeps across the iterations of one step to apply them:
+
+* ``exact``, ``project`` (clamp), ``abs``: the problem's Hessian as assembled (the filter,
+  if any, is fixed for the run);
+* ``shift``: H + c I with c raised until the factorisation (or a CG probe) shows no
+  negative curvature, lowered after each success (:class:`~fem_anim.hessian.ShiftStrategy`);
+* ``trust_region_filter``: clamp or abs per iteration from the ratio rho of the previous
+  step's actual to predicted decrease under the unprojected model;
+* ``auto``: exact while the factorisation's inertia shows no negative pivot, else the
+  trust-region filter's choice; with Krylov presets, a failed solve or line search makes
+  :meth:`HessianChoice.restart` continue the step filtered from its last iterate.
+
+Each step's iterations are counted per kind of Hessian (:data:`HESSIAN_KINDS`).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from petsc4py import PETSc
+
+from .errors import ConvergenceError
+from .hessian import ShiftStrategy, model_ratio, trust_region_choice
+
+__all__ = ["HessianChoice", "HESSIAN_KINDS", "MAX_AUTO_RESTARTS"]
+
+#: The Hessians a Newton iteration may use (counted per step):
+#: exact, exact + c I with c > 0, elastic tangent clamped, elastic tangent abs-filtered.
+HESSIAN_KINDS = ("exact", "shift", "clamp", "abs")
+#: SNES reasons after which ``hessian = "auto"`` continues the step with the filtered Hessian:
+#: CG met negative curvature (a failed linear solve), or the direction was no descent.
+_AUTO_RESTART = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
+                 PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
+#: How often one step of ``auto`` may continue after such a failure.
+MAX_AUTO_RESTARTS = 4
+
+
+class HessianChoice:
+    """The Hessian of each Newton iteration of one :class:`~fem_anim.solver.Minimiser`.
+
+    Args:
+        mode: ``solver.hessian`` (:data:`fem_anim.hessian.MODES`).
+        problem: The :class:`~fem_anim.problem.EnergyProblem` (assembles the Hessian,
+            sets the per-point filter, gives the unprojected curvature y^T H y).
+        snes: The minimiser's SNES (its KSP factorises and probes the Hessian).
+        objective: ``objective(snes, x)``, the minimiser's cached g.
+        residual: The vector SNES keeps the residual at the current iterate in (r . y is
+            the model's slope).
+    """
+
+    def __init__(self, mode: str, problem, snes: PETSc.SNES, objective,
+                 residual: PETSc.Vec):
+        self.mode = mode
+        self.problem = problem
+        self.snes = snes
+        self._objective = objective
+        self.problem_residual = residual
+        self.shift = ShiftStrategy() if mode == "shift" else None
+        self.its: Counter = Counter()  # this step's iterations per kind of Hessian
+        self._model = None  # (x_k, y_k, g_k, r.y, y^T H y) of the last direction, for rho
+        self._filtered = False  # auto: this step met an indefinite Hessian
+        self._no_exact = False  # auto: ... shown by a failed Krylov solve or line search
+        self.restarts = 0
+        self._last_iterate = None
+        self._inertia = True  # whether the factorisation reports its inertia (auto)
+
+    def start_step(self) -> None:
+        """Forget the previous step: counts, model, auto's state."""
+        self.its = Counter()
+        self.drop_model()
+        self._filtered = self._no_exact = False
+        self.restarts = 0
+
+    def restart(self, reason: int, stalled: bool, x: PETSc.Vec) -> bool:
+        """Whether ``auto`` continues a failed SNES solve filtered; if so x is reset.
+
+        After CG's negative curvature or a failed line search (not at the objective's
+        round-off, ``stalled``), at most :data:`MAX_AUTO_RESTARTS` times per step, the step
+        goes on from its last iterate with the trust-region filter's Hessian.
+        """
+        if self.mode != "auto" or reason not in _AUTO_RESTART or stalled or \
+                self.restarts >= MAX_AUTO_RESTARTS or self._last_iterate is None:
+            return False
+        self.restarts += 1
+        self._filtered = self._no_exact = True
+        self.drop_model()
+        self._last_iterate.copy(x)
+        return True
+
+    def end_step(self) -> None:
+        """``auto``: the next step starts exact."""
+        if self.mode == "auto":
+            self.problem.set_hessian_filter(None)
+
+    def counts(self) -> dict[str, int]:
+        """This step's Newton iterations per kind of Hessian."""
+        return {kind: self.its[kind] for kind in HESSIAN_KINDS}
+
+    def record_model(self, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        """Keep the exact quadratic model of g at x along y for the next iteration's rho.
+
+        Needed by the trust-region filter, and by ``auto`` once a step has switched to
+        the filtered Hessian: g(x), r.y and y^T H y with H unprojected
+        (:meth:`fem_anim.problem.EnergyProblem.curvature`).
+        """
+        if not (self.mode == "trust_region_filter" or
+                (self.mode == "auto" and self._filtered)):
+            self.drop_model()
+            return
+        g = self._objective(self.snes, x)
+        slope = self.problem_residual.dot(y)
+        curvature = self.problem.curvature(x, y)
+        if self._model is None:
+            self._model = [x.copy(), y.copy(), g, slope, curvature]
+        else:
+            x.copy(self._model[0])
+            y.copy(self._model[1])
+            self._model[2:] = [g, slope, curvature]
+
+    def drop_model(self) -> None:
+        if self._model is not None:
+            self._model[0].destroy()
+            self._model[1].destroy()
+        self._model = None
+
+    def _model_ratio(self, x: PETSc.Vec) -> float | None:
+        """rho of the step that led to x from the recorded model (None without one)."""
+        if self._model is None:
+            return None
+        x_k, y, g_k, slope, curvature = self._model
+        p = x.duplicate()
+        x.copy(p)
+        p.axpy(-1.0, x_k)  # p = x_{k+1} - x_k = -alpha y
+        yy = y.dot(y)
+        alpha = -p.dot(y) / yy if yy > 0.0 else 0.0
+        p.destroy()
+        self.drop_model()
+        return model_ratio(g_k - self._objective(self.snes, x), slope, curvature, alpha)
+
+    def jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
+        """The problem's Hessian, shifted by c I until it is positive definite if asked.
+
+        Positive definiteness is read off the factorisation: the inertia of MUMPS's or
+        PETSc's Cholesky (negative pivots), or a PETSc factorisation failure; for a
+        Krylov preset CG is run on the shifted matrix and must not meet negative
+        curvature. c starts from the last successful shift, quartered (hessian.py).
+        """
+        if self.mode in ("trust_region_filter", "auto"):
+            self._filtered_jacobian(snes, x, A, P)
+            return
+        self.problem.jacobian(snes, x, A, P)
+        if self.shift is None:
+            self.its[{"project": "clamp", "abs": "abs"}.get(self.mode, "exact")] += 1
+            return
+        scale = A.getDiagonal().norm(PETSc.NormType.INFINITY)
+        c = self.shift.first(scale)
+        if c > 0.0:
+            A.shift(c)
+        while not self._positive_definite(A):
+            previous = c
+            c = self.shift.raise_shift(scale)
+            A.shift(c - previous)
+            if c > 1e12 * max(scale, 1.0):
+                raise ConvergenceError("the Hessian shift grew beyond 1e12 x its diagonal: the "
+                                       "linear solver never reported a positive definite matrix")
+        self.its["shift" if c > 0.0 else "exact"] += 1
+        self.shift.succeeded()
+
+    def _filtered_jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
+        """The Hessian of ``trust_region_filter`` and ``auto`` (:mod:`fem_anim.hessian`).
+
+        trust_region_filter: clamp if the exact model predicted the last step's decrease
+        to 1 % (|rho - 1| < 0.01), else abs. auto: the exact Hessian whenever it is
+        positive definite; else the trust-region filter's choice. With a Cholesky
+        factorisation every iteration assembles the exact Hessian first and reads the
+        inertia of its factorisation (kept for the solve when it has no negative pivot).
+        Krylov presets show an indefinite Hessian only by a failed solve or line search
+        (:meth:`solve`), after which the step continues filtered: abs, or exact again
+        where the trust-region filter would clamp (the exact model is accurate there;
+        should CG fail again, the step continues filtered, at most
+        :data:`MAX_AUTO_RESTARTS` times).
+        """
+        rho = self._model_ratio(x)
+        problem = self.problem
+        if self.mode == "trust_region_filter":
+            how = trust_region_choice(rho)
+        else:
+            if self._last_iterate is None:
+                self._last_iterate = x.duplicate()
+            x.copy(self._last_iterate)
+            how = trust_region_choice(rho) if self._no_exact else None
+            if how == "clamp" and self.restarts < MAX_AUTO_RESTARTS:
+                how = None
+        problem.set_hessian_filter(how)
+        problem.jacobian(snes, x, A, P)
+        if self.mode == "auto" and how is None and self._negative_pivots(A):
+            self._filtered = True
+            how = trust_region_choice(rho)
+            problem.set_hessian_filter(how)
+            problem.jacobian(snes, x, A, P)
+        self.its[how or "exact"] += 1
+
+    def enable_inertia(self, A: PETSc.Mat) -> None:
+        """Ask MUMPS's Cholesky for the inertia of its factors (``auto``).
+
+        PETSc 3.18's MatGetInertia for MUMPS answers only with null-pivot detection
+        (ICNTL(24) = 1), and MUMPS reads its ``-mat_mumps_*`` options when it first
+        factorises, after the solver options have left PETSc's database
+        (:func:`fem_anim.petsc_options.options_in_database`): the controls are set on
+        the factor matrix itself, before its first factorisation.
+        """
+        ksp = self.snes.getKSP()
+        pc = ksp.getPC()
+        if pc.getType() != "cholesky" or pc.getFactorSolverType() != "mumps":
+            return
+        ksp.setOperators(A, A)
+        pc.setFactorSetUpSolverType()
+        factor = pc.getFactorMatrix()
+        factor.setMumpsIcntl(24, 1)  # null pivot detection: MatGetInertia answers
+        factor.setMumpsIcntl(13, 1)  # the inertia of the whole matrix under MPI
+
+    def _negative_pivots(self, A: PETSc.Mat) -> bool:
+        """Whether the Cholesky factorisation of A (kept for the solve) has a negative pivot.
+
+        False for solvers that report no inertia (Krylov presets, LU): ``auto`` then learns
+        of an indefinite Hessian from the failed solve or line search instead.
+        """
+        ksp = self.snes.getKSP()
+        pc = ksp.getPC()
+        if not self._inertia or pc.getType() != "cholesky":
+            return False
+        ksp.setOperators(A, A)
+        PETSc.Sys.pushErrorHandler("ignore")
+        try:
+            pc.setUp()
+            negative, _, _ = pc.getFactorMatrix().getInertia()
+        except PETSc.Error:
+            self._inertia = False  # this factorisation reports no inertia
+            return False
+        finally:
+            PETSc.Sys.popErrorHandler()
+        return negative > 0
+
+    def _positive_definite(self, A: PETSc.Mat) -> bool:
+        ksp = self.snes.getKSP()
+        ksp.setOperators(A, A)
+        pc = ksp.getPC()
+        if pc.getType() in ("cholesky", "lu"):
+            PETSc.Sys.pushErrorHandler("ignore")
+            try:
+                pc.setUp()
+                negative, _, _ = pc.getFactorMatrix().getInertia()
+                return negative == 0
+            except PETSc.Error:
+                pass  # this factorisation reports no inertia: ask CG instead
+            finally:
+                PETSc.Sys.popErrorHandler()
+        probe = PETSc.KSP().create(A.getComm())
+        probe.setOperators(A, A)
+        probe.setType("cg")
+        probe.getPC().setType("jacobi")
+        probe.setTolerances(rtol=1e-6, max_it=200)
+        b, z = A.createVecs()
+        b.setRandom()
+        probe.solve(b, z)
+        indefinite = probe.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
+        for obj in (probe, b, z):
+            obj.destroy()
+        return not indefinite
+
+    def destroy(self) -> None:
+        if self._last_iterate is not None:
+            self._last_iterate.destroy()
+        self.drop_model()
