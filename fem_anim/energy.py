@@ -116,9 +116,11 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         see the module docstring).
         ``unconverged_steps`` lists the steps kept at the round-off floor of the objective
         without meeting their stopping test (``snes_reason`` =
-        :data:`fem_anim.solver.POLISH_FAILED_REASON`).
+        :data:`fem_anim.solver.POLISH_FAILED_REASON`); ``budget_steps`` those accepted
+        at their iteration budget without meeting it (``solver.on_budget = "accept"``,
+        :data:`fem_anim.solver.BUDGET_REASON`).
     """
-    from .solver import POLISH_FAILED_REASON  # here: importing PETSc waits for init_petsc
+    from .solver import BUDGET_REASON, POLISH_FAILED_REASON  # here: importing PETSc waits for init_petsc
 
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]
@@ -141,7 +143,9 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
             "damped": damped, "gained": gained, "flagged": damped or gained,
             "friction_newmark": friction and scene["time"]["integrator"] == "newmark",
             "unconverged_steps": [int(r["step"]) for r in rows
-                                  if r.get("snes_reason") == POLISH_FAILED_REASON]}
+                                  if r.get("snes_reason") == POLISH_FAILED_REASON],
+            "budget_steps": [int(r["step"]) for r in rows
+                             if r.get("snes_reason") == BUDGET_REASON]}
 
 
 def _contact(scene) -> bool:
@@ -156,6 +160,11 @@ def describe_energy(report: dict, scene) -> str:
     unconverged = report.get("unconverged_steps") or []
     unmet = (f"; {len(unconverged)} step(s) stopped at the round-off floor without meeting "
              f"the stopping test (first: step {unconverged[0]})") if unconverged else ""
+    budget = report.get("budget_steps") or []
+    if budget:
+        unmet += (f"; {len(budget)} step(s) accepted at the iteration budget "
+                  f"(solver.max_iterations) without meeting the stopping test "
+                  f"(first: step {budget[0]})")
     if report["drift"] is None:
         return (f"no energy exchanged above round-off ({report['exchanged_energy']:.3g} J): "
                 f"the body stayed at rest{unmet}")

@@ -38,7 +38,7 @@ STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "s
                  "exact_its", "shift_its", "clamp_its", "abs_its", "kinetic", "elastic",
                  "gravity", "contact", "total_energy", "assembly_s", "factor_s",
                  "linear_solve_s", "other_s", "solve_wall_s", "step_wall_s", "contact_s",
-                 "contact_pairs"]
+                 "contact_pairs", "residual_ratio"]
 
 
 class VertexGather:
@@ -196,7 +196,8 @@ class StatsWriter:
 
     def write(self, row: dict) -> None:
         if self.rank0:
-            self._writer.writerow({k: row[k] for k in STATS_COLUMNS})
+            # a checkpoint written before a column existed resumes with it empty
+            self._writer.writerow({k: row.get(k, "") for k in STATS_COLUMNS})
             self._file.flush()
 
     def close(self) -> None:

@@ -329,6 +329,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "hessian": Key(str, "exact", _one_of(HESSIAN_MODES)),
         "forcing": Key(str, "tight", _one_of(("tight", "adaptive"))),
         "inversion_filter": Key(bool, None),
+        "max_iterations": Key(int, None, lambda v: None if v >= 1 else "must be >= 1"),
+        "on_budget": Key(str, "fail", _one_of(("fail", "accept"))),
         "petsc": Key(dict, {}, _check_petsc),
     },
     "output": {

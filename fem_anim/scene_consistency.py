@@ -185,6 +185,9 @@ def check_consistency(data: dict[str, Any]) -> None:
         raise SceneError(f"solver.forcing = {solver['forcing']!r} sets the Krylov tolerance of "
                          f"Newton's linear solves; solver.method = {solver['method']!r} has "
                          "none (use 'newton' or 'trust_region')")
+    if solver["on_budget"] == "accept" and solver["max_iterations"] is None:
+        raise SceneError("solver.on_budget = \"accept\" accepts the iterate after "
+                         "solver.max_iterations Newton iterations: set solver.max_iterations")
 
 
 def _check_bodies(data: dict[str, Any]) -> None:

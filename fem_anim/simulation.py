@@ -465,6 +465,7 @@ class Simulation:
             "residual_norm": solve.residual_norm,
             "initial_residual_norm": solve.initial_residual_norm,
             "newton_decrement": solve.newton_decrement, "shift": solve.shift,
+            "residual_ratio": solve.residual_ratio,
             **{f"{kind}_its": count for kind, count in solve.hessian_its.items()}, **energies,
             "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,

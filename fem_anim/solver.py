@@ -16,6 +16,16 @@ the solver's prefix (default ``fem_anim_``), merged with the precedence of
   per iteration by the trust-region ratio, or ``auto``: exact while the Hessian is positive
   definite, abs-filtered when it is not (:mod:`fem_anim.hessian`); each step's iterations are
   counted per kind of Hessian (:attr:`SolveStats.hessian_its`);
+* ``max_iterations`` and ``on_budget``: a budget of Newton iterations per step (the
+  polish's full steps included; at most the preset's ``snes_max_it``, which it replaces).
+  ``"fail"``: a step that does not meet its test within it fails (DIVERGED_MAX_IT, and the
+  adaptive stepper retries with dt halved); ``"accept"``: the last iterate is kept if it
+  decreased the step objective below g at the initial guess, reported with
+  :data:`BUDGET_REASON` (accepted, *not* converged) and the ratio of its residual norm to
+  the requested test (:attr:`SolveStats.residual_ratio`). ``max_iterations = 1`` is one
+  Newton step with line search from the predictor: the linearly implicit step of
+  Baraff and Witkin (seed eq. 10 with one iteration). The stopping test still ends a step
+  before its budget when met;
 * ``inversion_filter``: the pre-check halves the Newton step until no element has
   det F <= 0, and the objective is +inf there (:meth:`EnergyProblem.objective`), so no
   iterate with an inverted element is ever accepted;
@@ -49,7 +59,7 @@ from .petsc_options import DEFAULT_PREFIX, options_in_database, unused_options
 from .problem import EVENTS
 
 __all__ = ["Minimiser", "SolveStats", "ROUNDOFF_REASON", "POLISH_FAILED_REASON",
-           "CONVERGED_REASONS", "NONLINEAR_METHODS", "HESSIAN_KINDS"]
+           "BUDGET_REASON", "CONVERGED_REASONS", "NONLINEAR_METHODS", "HESSIAN_KINDS"]
 
 #: Scene ``solver.method`` -> PETSc options (lowest layer above the library defaults).
 NONLINEAR_METHODS: dict[str, dict[str, str]] = {
@@ -81,6 +91,11 @@ SADDLE_FLOOR = 1e-6
 #: kept, as converged as double precision allows, but it is *not* converged to the test,
 #: and stats.csv, the energy report and summary.json say so.
 POLISH_FAILED_REASON = 6
+#: Reason recorded when ``solver.on_budget = "accept"`` kept the iterate reached after
+#: ``solver.max_iterations`` Newton iterations because it decreased the step objective
+#: (no PETSc reason is 7): accepted, *not* converged to the test; stats.csv, the energy
+#: report and summary.json say so, and ``residual_ratio`` says by how much.
+BUDGET_REASON = 7
 #: Reasons of a step that met its stopping test.
 CONVERGED_REASONS = (2, 3, DECREMENT_REASON)
 
@@ -95,6 +110,9 @@ class SolveStats:
     times are wall seconds. ``reason`` is :data:`POLISH_FAILED_REASON` for a step kept at
     the round-off floor without meeting its test.
     ``hessian_its`` the Newton iterations per kind of Hessian (:data:`HESSIAN_KINDS`).
+    ``residual_ratio`` is ``residual_norm / max(snes_atol, snes_rtol r0)``: <= 1 where
+    the norm test is met, its excess for a step accepted at its budget
+    (:data:`BUDGET_REASON`).
     """
 
     newton_its: int
@@ -109,6 +127,7 @@ class SolveStats:
     linear_solve_s: float = 0.0
     initial_residual_norm: float = float("nan")
     hessian_its: dict = field(default_factory=dict)
+    residual_ratio: float = float("nan")
 
 
 class Minimiser:
@@ -128,6 +147,9 @@ class Minimiser:
         self.prefix = prefix
         self.stopping = settings.get("stopping", "norm")
         self.decrement_tol = settings.get("decrement_tol", 0.0)
+        self.budget = settings.get("max_iterations")  # None: the preset's snes_max_it
+        self.on_budget = settings.get("on_budget", "fail")
+        self._polish_its = 0  # full Newton steps of the last polish
         self._restarting = False  # auto continues a failed solve (HessianChoice.restart)
         # -mat_type (aij, baij) picks the Hessian's storage; PETSc never reads it for a
         # matrix the application creates, so it is taken here
@@ -166,6 +188,8 @@ class Minimiser:
                                f"{shown}") from None
         finally:
             PETSc.Sys.popErrorHandler()
+        if self.budget is not None:
+            snes.setTolerances(max_it=self.budget)
         if snes.getType() in ("newtonls",):
             snes.setLineSearchPreCheck(self._precheck)
         # a fieldsplit PC learns its fields from the problem, and reads its sub-solvers'
@@ -215,13 +239,16 @@ class Minimiser:
         g0 = self.objective(self.snes, x)
         newton_its = linear_its = 0
         while True:
+            if self.budget is not None:  # an auto restart gets what is left of the budget
+                self.snes.setTolerances(max_it=self.budget - newton_its)
             self._snes_solve(x, what)
             reason = self.snes.getConvergedReason()
             newton_its += self.snes.getIterationNumber()
             linear_its += self.snes.getLinearSolveIterations()
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)
-            if self.hessian.restart(reason, stalled, x):
+            spent = self.budget is not None and newton_its >= self.budget
+            if not spent and self.hessian.restart(reason, stalled, x):
                 # the exact Hessian was indefinite where no inertia showed it: continue from
                 # the last iterate filtered (trust-region choice; the same stopping test)
                 self._restarting = True
@@ -230,7 +257,14 @@ class Minimiser:
         self.hessian.end_step()
         norm = self.snes.getFunctionNorm()
         if reason == ROUNDOFF_REASON or stalled:
-            reason, norm = self._polish(x)
+            if self.budget is None:
+                reason, norm = self._polish(x)
+            else:  # the polish's full Newton steps are iterations of the budget
+                reason, norm = self._polish(x, max_steps=min(5, self.budget - newton_its))
+                newton_its += self._polish_its
+        elif reason == PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT and \
+                self.budget is not None and self.on_budget == "accept":
+            reason = self._accept_at_budget(x, g0, norm, what)
         wall = time.perf_counter() - start
         factor1, solve1 = (e.getPerfInfo()["time"] for e in self._events)
         stats = SolveStats(
@@ -240,7 +274,7 @@ class Minimiser:
             assembly_s=self.problem.assembly_s - assembly0, factor_s=factor1 - factor0,
             linear_solve_s=solve1 - solve0,
             initial_residual_norm=self._history[0][0] if self._history else float("nan"),
-            hessian_its=self.hessian.counts())
+            hessian_its=self.hessian.counts(), residual_ratio=norm / self._target())
         if reason <= 0:
             ksp_reason = self.snes.getKSP().getConvergedReason()
             raise ConvergenceError(
@@ -250,6 +284,34 @@ class Minimiser:
                 f"residual norm {stats.residual_norm:.3e})")
         x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         return stats
+
+    def _target(self) -> float:
+        """The residual norm the norm test asks for: max(snes_atol, snes_rtol r0)."""
+        rtol, atol, _, _ = self.snes.getTolerances()
+        return max(atol, rtol * self._history[0][0]) if self._history else atol
+
+    def _accept_at_budget(self, x: PETSc.Vec, g0: float, norm: float, what: str) -> int:
+        """``on_budget = "accept"``: keep x, the iterate after the budget, if it improved.
+
+        A minimisation keeps x when g(x) < g(x_0) (the initial guess), a saddle point
+        when ||r(x)|| < ||r(x_0)||: the step is then :data:`BUDGET_REASON`.
+
+        Raises:
+            ConvergenceError: if it did not improve (the step fails as without a budget).
+        """
+        if self.saddle:
+            r0 = self._history[0][0] if self._history else np.inf
+            better, shown = norm < r0, f"residual norm {norm:.6e}, initially {r0:.6e}"
+        else:
+            g = self.objective(self.snes, x)
+            better, shown = g < g0, f"g = {g:.10e}, at the initial guess {g0:.10e}"
+        if not better:
+            raise ConvergenceError(
+                f"{what}: after its budget of {self.budget} Newton iterations "
+                f"(solver.max_iterations) the step did not improve on its initial guess "
+                f"({shown}), so it cannot be accepted")
+        self.problem.set_state(x)
+        return BUDGET_REASON
 
     def _snes_solve(self, x: PETSc.Vec, what: str) -> None:
         PETSc.Sys.pushErrorHandler("ignore")  # reported once, below, not as PETSc's stack
@@ -412,9 +474,10 @@ class Minimiser:
         Returns:
             The SNES reason to report and the final residual norm.
         """
-        rtol, atol, _, _ = self.snes.getTolerances()
-        target = max(atol, rtol * self._history[0][0]) if self._history else atol
+        _, atol, _, _ = self.snes.getTolerances()
+        target = self._target()
         R = PETSc.SNES.ConvergedReason
+        self._polish_its = 0
         r, step, trial, r_trial = (self.b.duplicate() for _ in range(4))
         try:
             self.problem.residual(self.snes, x, r)
@@ -423,6 +486,7 @@ class Minimiser:
                 if norm <= target and self.stopping == "norm":
                     break
                 decrement = self.newton_step(x, r, step)
+                self._polish_its += 1
                 self._decrements.append(np.nan if self.saddle else decrement)
                 if self.stopping == "decrement" and decrement <= self.decrement_tol:
                     return DECREMENT_REASON, norm
