@@ -45,6 +45,8 @@ MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohooke
 FORMULATIONS = ("displacement", "mixed")
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
+#: ``solver.hessian_update``: how often Newton's Hessian is rebuilt (fem_anim/hessian_reuse.py).
+HESSIAN_UPDATES = ("every_iteration", "every_step", "lagged", "rest")
 NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
 OBSTACLE_TYPES = ("plane", "sphere")
 MAX_MAGNITUDE = 1.0e150  # larger values are taken as a typo or an attack, not physics
@@ -331,6 +333,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "inversion_filter": Key(bool, None),
         "max_iterations": Key(int, None, lambda v: None if v >= 1 else "must be >= 1"),
         "on_budget": Key(str, "fail", _one_of(("fail", "accept"))),
+        "hessian_update": Key(str, "every_iteration", _one_of(HESSIAN_UPDATES)),
+        "hessian_lag": Key(int, 2, lambda v: None if v >= 1 else "must be >= 1"),
         "petsc": Key(dict, {}, _check_petsc),
     },
     "output": {

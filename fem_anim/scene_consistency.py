@@ -185,6 +185,20 @@ def check_consistency(data: dict[str, Any]) -> None:
         raise SceneError(f"solver.forcing = {solver['forcing']!r} sets the Krylov tolerance of "
                          f"Newton's linear solves; solver.method = {solver['method']!r} has "
                          "none (use 'newton' or 'trust_region')")
+    update = solver["hessian_update"]
+    if update != "every_iteration":
+        if solver["hessian"] not in ("exact", "project", "abs"):
+            raise SceneError(f"solver.hessian_update = {update!r} keeps a Hessian over "
+                             f"iterations; solver.hessian = {solver['hessian']!r} chooses one "
+                             "per iteration (use exact, project or abs)")
+        methods = ("newton", "lbfgs") if update in ("rest", "every_step") else ("newton",)
+        if solver["method"] not in methods:
+            raise SceneError(f"solver.hessian_update = {update!r} needs solver.method in "
+                             f"{', '.join(methods)}, got {solver['method']!r}")
+        if data["element"].get("formulation") == "mixed":
+            raise SceneError(f"solver.hessian_update = {update!r} is refused with element."
+                             "formulation = \"mixed\" (a kept saddle-point Hessian gives no "
+                             "descent on the merit function)")
     if solver["on_budget"] == "accept" and solver["max_iterations"] is None:
         raise SceneError("solver.on_budget = \"accept\" accepts the iterate after "
                          "solver.max_iterations Newton iterations: set solver.max_iterations")

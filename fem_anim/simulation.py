@@ -77,6 +77,9 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
     above = merge_options(flatten_options(scene["solver"]["petsc"]), cli_options or {})
     layer = drop_replaced(layer, above)
     method = NONLINEAR_METHODS[scene["solver"]["method"]]
+    if scene["solver"]["method"] == "lbfgs" and scene["solver"]["hessian_update"] != \
+            "every_iteration":  # the kept Hessian is L-BFGS's initial one (hessian_reuse.py)
+        method = method | {"snes_qn_scale_type": "jacobian"}
     if scene["solver"]["hessian"] in ("shift", "auto"):
         layer = layer | {"mat_mumps_icntl_13": "1"}  # exact inertia from MUMPS in parallel
     try:  # the scene checked the method; the preset may come from the command line
@@ -466,6 +469,8 @@ class Simulation:
             "initial_residual_norm": solve.initial_residual_norm,
             "newton_decrement": solve.newton_decrement, "shift": solve.shift,
             "residual_ratio": solve.residual_ratio,
+            "hessian_assemblies": solve.hessian_assemblies,
+            "factorisations": solve.factorisations,
             **{f"{kind}_its": count for kind, count in solve.hessian_its.items()}, **energies,
             "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,

@@ -54,6 +54,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from .errors import ConvergenceError, FemAnimError
+from .hessian_reuse import HessianReuse
 from .newton_hessian import HESSIAN_KINDS, HessianChoice
 from .petsc_options import DEFAULT_PREFIX, options_in_database, unused_options
 from .problem import EVENTS
@@ -112,7 +113,10 @@ class SolveStats:
     ``hessian_its`` the Newton iterations per kind of Hessian (:data:`HESSIAN_KINDS`).
     ``residual_ratio`` is ``residual_norm / max(snes_atol, snes_rtol r0)``: <= 1 where
     the norm test is met, its excess for a step accepted at its budget
-    (:data:`BUDGET_REASON`).
+    (:data:`BUDGET_REASON`). ``hessian_assemblies`` counts the Hessians assembled
+    (fewer than the iterations when ``solver.hessian_update`` keeps one), and
+    ``factorisations`` the preconditioner set-ups (PETSc's PCSetUp events: a direct
+    solver's factorisations).
     """
 
     newton_its: int
@@ -128,6 +132,8 @@ class SolveStats:
     initial_residual_norm: float = float("nan")
     hessian_its: dict = field(default_factory=dict)
     residual_ratio: float = float("nan")
+    hessian_assemblies: int = 0
+    factorisations: int = 0
 
 
 class Minimiser:
@@ -150,6 +156,7 @@ class Minimiser:
         self.budget = settings.get("max_iterations")  # None: the preset's snes_max_it
         self.on_budget = settings.get("on_budget", "fail")
         self._polish_its = 0  # full Newton steps of the last polish
+        self._polish_assemblies = 0  # ... that assembled a Hessian
         self._restarting = False  # auto continues a failed solve (HessianChoice.restart)
         # -mat_type (aij, baij) picks the Hessian's storage; PETSc never reads it for a
         # matrix the application creates, so it is taken here
@@ -167,7 +174,9 @@ class Minimiser:
         snes.setFunction(problem.residual, self.b)
         self.hessian = HessianChoice(settings.get("hessian", "exact"), problem, snes,
                                      self.objective, self.b)
-        snes.setJacobian(self.hessian.jacobian, self.A)
+        self.reuse = HessianReuse(settings.get("hessian_update", "every_iteration"),
+                                  settings.get("hessian_lag", 2), problem, self.hessian.jacobian)
+        snes.setJacobian(self.reuse.jacobian, self.A)
         snes.setConvergenceTest(self._converged)
         self._history: list[tuple[float, float]] = []
         self._decrements: list[float] = []
@@ -233,8 +242,10 @@ class Minimiser:
         self._decrements = []
         assembly0 = self.problem.assembly_s
         factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
+        factorisations0 = self._events[0].getPerfInfo()["count"]
         self._clear_objective_cache()
         self.hessian.start_step()
+        self.reuse.start_step()
         self._restarting = False
         g0 = self.objective(self.snes, x)
         newton_its = linear_its = 0
@@ -248,6 +259,9 @@ class Minimiser:
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)
             spent = self.budget is not None and newton_its >= self.budget
+            if not spent and not stalled and self.reuse.retry(reason, x):
+                self._restarting = True  # a kept Hessian failed: on from x_k with a fresh one
+                continue
             if not spent and self.hessian.restart(reason, stalled, x):
                 # the exact Hessian was indefinite where no inertia showed it: continue from
                 # the last iterate filtered (trust-region choice; the same stopping test)
@@ -257,10 +271,16 @@ class Minimiser:
         self.hessian.end_step()
         norm = self.snes.getFunctionNorm()
         if reason == ROUNDOFF_REASON or stalled:
-            if self.budget is None:
-                reason, norm = self._polish(x)
-            else:  # the polish's full Newton steps are iterations of the budget
-                reason, norm = self._polish(x, max_steps=min(5, self.budget - newton_its))
+            steps = 5 if self.budget is None else min(5, self.budget - newton_its)
+            if self.reuse.mode == "rest":  # first with the kept factorisation
+                reason, norm = self._polish(x, max_steps=steps, assemble=False)
+                kept_its = self._polish_its
+                if reason == POLISH_FAILED_REASON and steps - kept_its > 0:
+                    reason, norm = self._polish(x, max_steps=steps - kept_its)  # exact
+                    self._polish_its += kept_its
+            else:
+                reason, norm = self._polish(x, max_steps=steps)
+            if self.budget is not None:  # the polish's full Newton steps are iterations
                 newton_its += self._polish_its
         elif reason == PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT and \
                 self.budget is not None and self.on_budget == "accept":
@@ -274,7 +294,9 @@ class Minimiser:
             assembly_s=self.problem.assembly_s - assembly0, factor_s=factor1 - factor0,
             linear_solve_s=solve1 - solve0,
             initial_residual_norm=self._history[0][0] if self._history else float("nan"),
-            hessian_its=self.hessian.counts(), residual_ratio=norm / self._target())
+            hessian_its=self.hessian.counts(), residual_ratio=norm / self._target(),
+            hessian_assemblies=self.reuse.assemblies + self._polish_assemblies,
+            factorisations=self._events[0].getPerfInfo()["count"] - factorisations0)
         if reason <= 0:
             ksp_reason = self.snes.getKSP().getConvergedReason()
             raise ConvergenceError(
@@ -369,6 +391,8 @@ class Minimiser:
             self._history.append((fnorm, g))
             return PETSc.SNES.ConvergedReason.ITERATING
         self._history.append((fnorm, g))
+        if it > 0:
+            self.reuse.check_step(snes.getSolution())
         R = PETSc.SNES.ConvergedReason
         if not np.isfinite(fnorm):
             return R.DIVERGED_FNORM_NAN
@@ -404,6 +428,7 @@ class Minimiser:
         if self.problem.filter_inversion:
             scaled = self._filter_inverting(x, y) or scaled
         self.hessian.record_model(x, y)
+        self.reuse.record_direction(x, y)
         return scaled
 
     def _filter_inverting(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
@@ -456,18 +481,22 @@ class Minimiser:
         """
         ksp = self.snes.getKSP()
         if assemble_hessian:
+            self.reuse.invalidate()  # the kept Hessian is overwritten
             self.problem.jacobian(self.snes, x, self.A, self.A)
             ksp.setOperators(self.A, self.A)
         ksp.solve(r, step)
         return 0.5 * abs(r.dot(step))
 
-    def _polish(self, x: PETSc.Vec, max_steps: int = 5) -> tuple[int, float]:
+    def _polish(self, x: PETSc.Vec, max_steps: int = 5,
+                assemble: bool = True) -> tuple[int, float]:
         """Full Newton steps judged by the residual, where g can no longer judge them.
 
         Below the objective's round-off the line search cannot tell a good step from a bad
         one, but the residual still can: take full steps while each at least halves the
         residual norm, then apply the chosen test (norms: ``snes_atol``, ``snes_rtol``;
-        or the decrement of the next Newton direction). If it is still not met, x is kept
+        or the decrement of the next Newton direction). ``assemble=False`` solves with the
+        kept Hessian and its factorisation instead (``hessian_update = "rest"``, whose
+        constant factorisation would otherwise be lost). If it is still not met, x is kept
         (it is as converged as double precision allows) but the step is reported as not
         converged to its test: :data:`POLISH_FAILED_REASON`.
 
@@ -477,7 +506,7 @@ class Minimiser:
         _, atol, _, _ = self.snes.getTolerances()
         target = self._target()
         R = PETSc.SNES.ConvergedReason
-        self._polish_its = 0
+        self._polish_its = self._polish_assemblies = 0
         r, step, trial, r_trial = (self.b.duplicate() for _ in range(4))
         try:
             self.problem.residual(self.snes, x, r)
@@ -485,8 +514,9 @@ class Minimiser:
             for _ in range(max_steps):
                 if norm <= target and self.stopping == "norm":
                     break
-                decrement = self.newton_step(x, r, step)
+                decrement = self.newton_step(x, r, step, assemble_hessian=assemble)
                 self._polish_its += 1
+                self._polish_assemblies += assemble
                 self._decrements.append(np.nan if self.saddle else decrement)
                 if self.stopping == "decrement" and decrement <= self.decrement_tol:
                     return DECREMENT_REASON, norm
@@ -513,6 +543,7 @@ class Minimiser:
     def destroy(self) -> None:
         self._clear_objective_cache()
         self.hessian.destroy()
+        self.reuse.destroy()
         self.snes.destroy()
         self.A.destroy()
         self.b.destroy()
