@@ -246,6 +246,7 @@ class Minimiser:
         self._clear_objective_cache()
         self.hessian.start_step()
         self.reuse.start_step()
+        self._polish_its = self._polish_assemblies = 0
         self._restarting = False
         g0 = self.objective(self.snes, x)
         newton_its = linear_its = 0
