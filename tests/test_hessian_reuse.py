@@ -13,10 +13,12 @@ import pytest
 import scenes
 from conftest import mpirun_command
 from mpi4py import MPI
+from petsc4py import PETSc
 from test_budget import DT, falling_bar, run_rows
 from test_cli import read_stats
 
 from fem_anim.cli import main
+from fem_anim.hessian_reuse import HessianReuse
 from fem_anim.simulation import Simulation
 from fem_anim.solver import CONVERGED_REASONS
 
@@ -109,3 +111,82 @@ def test_bad_hessian_update_keys_exit_2(tmp_path, capsys, solver, message):
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("fem-anim: error: ") and message in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+class _Weight:
+    def __init__(self, value):
+        self.value = value
+
+
+class _Problem:
+    def __init__(self, w=1e-4):
+        self.weight = _Weight(w)
+
+
+def _reuse(mode, lag=2):
+    """A HessianReuse whose 'assembly' records the point it was asked for."""
+    at = []
+    reuse = HessianReuse(mode, lag, _Problem(), lambda snes, x, A, P: at.append(x.array.copy()))
+    return reuse, at
+
+
+def _vec(values):
+    v = PETSc.Vec().createSeq(len(values), comm=PETSc.COMM_SELF)
+    v.array[:] = values
+    return v
+
+
+def test_lagged_rule_and_retry_unit():
+    """lag 3 assembles at iterations 1, 4, 7; a shortened stale step, a failed line search
+    on a stale Hessian and a new w each force a rebuild; round-off in w does not."""
+    reuse, at = _reuse("lagged", lag=3)
+    reuse.start_step()
+    x, y = _vec([1.0, 2.0]), _vec([0.5, 0.5])
+    for _ in range(7):
+        reuse.jacobian(None, x, None, None)
+    assert len(at) == 3 and (reuse.assemblies, reuse.reused) == (3, 4)
+    reuse.jacobian(None, x, None, None)  # stale (age 1 of 3)
+    reuse.record_direction(x, y)
+    shortened = _vec(x.array - 0.5 * y.array)
+    reuse.check_step(shortened)
+    reuse.jacobian(None, shortened, None, None)
+    assert len(at) == 4 and np.array_equal(at[-1], shortened.array)  # rebuilt there
+    reuse.jacobian(None, x, None, None)  # stale again
+    reuse.record_direction(x, y)
+    reuse.check_step(_vec(x.array - y.array))  # a full step keeps it
+    reuse.jacobian(None, x, None, None)
+    assert len(at) == 4
+    moved = _vec([9.0, 9.0])
+    assert reuse.retry(PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH, moved)
+    assert np.array_equal(moved.array, x.array)  # back to x_k
+    assert not reuse.retry(PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH, moved)  # once
+    reuse.jacobian(None, x, None, None)
+    assert len(at) == 5
+    reuse.problem.weight.value *= 1.0 + 1e-15  # a frame's last substep: round-off
+    reuse.start_step()
+    reuse.jacobian(None, x, None, None)
+    assert len(at) == 5
+    reuse.problem.weight.value *= 0.25  # dt halved
+    reuse.start_step()
+    reuse.jacobian(None, x, None, None)
+    assert len(at) == 6
+    reuse.destroy()
+
+
+def test_rest_and_every_step_unit():
+    reuse, at = _reuse("rest")
+    x = _vec([1.0, 2.0])
+    for _ in range(3):
+        reuse.start_step()
+        for _ in range(4):
+            reuse.jacobian(None, x, None, None)
+    assert len(at) == 1 and not at[0].any()  # once, at the rest state u = 0
+    assert not reuse.retry(PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH, x)
+    reuse.destroy()
+    reuse, at = _reuse("every_step")
+    for _ in range(3):
+        reuse.start_step()
+        for _ in range(4):
+            reuse.jacobian(None, x, None, None)
+    assert len(at) == 3
+    reuse.destroy()
