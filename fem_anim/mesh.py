@@ -29,6 +29,7 @@ from mpi4py import MPI
 from . import compat
 from .connectivity import check_one_body
 from .errors import MeshError
+from .meshes.structured import structured_box
 
 __all__ = [
     "SimplexMesh",
@@ -519,6 +520,10 @@ def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
                 path = path if path.is_absolute() else scene.base_dir / path
                 source = f"mesh file {path}"
                 points, cells, markers, names = read_mesh_file(path, d, cfg["element_size"])
+            elif cfg["shape"] == "box" and cfg.get("divisions") is not None:
+                points, cells = structured_box(cfg["size"], cfg["divisions"], cfg["origin"])
+                markers, names = np.ones(len(cells), np.int32), {"body": 1}
+                source = f"mesh (structured box {cfg['divisions']})"
             else:
                 points, cells, markers, names = _build_gmsh(cfg)
         except MeshError as err:

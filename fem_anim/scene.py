@@ -93,6 +93,11 @@ def _all_positive(v) -> str | None:
     return None if all(c > 0 for c in v) else "must have all entries > 0"
 
 
+def _divisions(v) -> str | None:
+    ok = all(isinstance(c, int) and not isinstance(c, bool) and c >= 1 for c in v)
+    return None if ok else "must have all entries whole numbers >= 1"
+
+
 def _steps(v) -> str | None:
     if v < 1:
         return "must be >= 1"
@@ -244,6 +249,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "minor_radius": Key(NUM, 0.03, _positive),
         "element_size": Key(NUM, 0.05, _positive),
         "file": Key(str, None),
+        "divisions": Key(list, None, _divisions, (2, 3)),
     },
     "element": {
         "degree": Key(int, 1, _one_of((1, 2))),

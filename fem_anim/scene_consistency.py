@@ -80,6 +80,8 @@ def _check_formulation(data: dict[str, Any]) -> None:
 def _estimated_cells(mesh: dict[str, Any]) -> float:
     """A rough count of the simplices gmsh makes (d! per cube of the element size)."""
     d, h = mesh["dim"], mesh["element_size"]
+    if mesh["shape"] == "box" and mesh["divisions"] is not None:  # exact: d! per cube
+        return math.factorial(d) * math.prod(mesh["divisions"])
     r, length, a = mesh["radius"], mesh["length"], mesh["minor_radius"]
     measure = {
         "box": math.prod(mesh["size"]) if len(mesh["size"]) == d else 0.0,
@@ -108,7 +110,14 @@ def _check_mesh(mesh: dict[str, Any], where: str = "mesh") -> None:
         # explicit shape = "box" and an absent one look alike here
         raise SceneError(f"{where}.file = {mesh['file']!r} is not used with {where}.shape = "
                          f"{mesh['shape']!r}: set {where}.shape = \"file\" to simulate the file")
-    if mesh["shape"] == "box" and mesh["element_size"] > max(mesh["size"]):
+    if mesh["divisions"] is not None and mesh["shape"] != "box":
+        raise SceneError(f"{where}.divisions = {mesh['divisions']} is used with {where}.shape = "
+                         f"\"box\" only, not {mesh['shape']!r}")
+    if mesh["divisions"] is not None and len(mesh["divisions"]) != d:
+        raise SceneError(f"{where}.divisions must have {d} entries for {where}.dim = {d}, "
+                         f"got {mesh['divisions']}")
+    if mesh["shape"] == "box" and mesh["divisions"] is None and \
+            mesh["element_size"] > max(mesh["size"]):
         raise SceneError(f"{where}.element_size must not exceed the box size "
                          f"{max(mesh['size'])}, got {mesh['element_size']}")
     if mesh["shape"] == "torus" and mesh["minor_radius"] >= mesh["radius"]:
@@ -116,9 +125,10 @@ def _check_mesh(mesh: dict[str, Any], where: str = "mesh") -> None:
                          f"got {mesh['minor_radius']}")
     cells = _estimated_cells(mesh)
     if cells > MAX_CELLS:
-        raise SceneError(f"{where}.element_size = {mesh['element_size']} would make about "
-                         f"{cells:.2g} cells for this {mesh['shape']} (at most {MAX_CELLS:.0e}); "
-                         "use a larger element size")
+        key = "divisions" if mesh["divisions"] is not None else "element_size"
+        raise SceneError(f"{where}.{key} = {mesh[key]} would make about {cells:.2g} cells for "
+                         f"this {mesh['shape']} (at most {MAX_CELLS:.0e}); use fewer, larger "
+                         "elements")
 
 
 def _check_pins(pins: list[dict[str, Any]], d: int, prefix: str = "") -> None:

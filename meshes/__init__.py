@@ -5,6 +5,8 @@ and returns the model. Builders never initialise or finalise gmsh: the caller ow
 session (see :func:`fem_anim.mesh.build_mesh`). Every builder names the physical group
 ``body`` (tag 1) of its cells and ``surface`` (tag 1, one dimension lower) of its whole
 boundary, plus the parts of the boundary a scene may refer to (``xmin``, ``side``, ...).
+:func:`structured_box` (numpy, no gmsh) cuts a box into a regular grid of simplices
+(``mesh.divisions``).
 
 :data:`BUILDERS` calls them uniformly as ``BUILDERS[shape](model, mesh)`` with a scene's
 ``[mesh]`` table ``mesh``; :data:`BUILDER_KEYS` says which keys each one reads.
@@ -18,6 +20,7 @@ from .box import build_box
 from .capsule import build_capsule
 from .cylinder import build_cylinder
 from .sphere import build_sphere
+from .structured import structured_box
 from .surface import build_volume_from_surface
 from .torus import build_torus
 
@@ -30,6 +33,7 @@ __all__ = [
     "build_sphere",
     "build_torus",
     "build_volume_from_surface",
+    "structured_box",
 ]
 
 #: Scene ``mesh.shape`` -> the ``[mesh]`` keys its builder takes (as keyword arguments).

@@ -23,7 +23,7 @@ from mpi4py import MPI
 from fem_anim import meshes
 from fem_anim.cli import main
 from fem_anim.errors import MeshError, SceneError
-from fem_anim.mesh import build_mesh, check_cells, check_surface, mesh_from_arrays
+from fem_anim.mesh import build_mesh, cell_volumes, check_cells, check_surface, mesh_from_arrays
 from fem_anim.reference.mesh import box_mesh
 from fem_anim.scene import MESH_SHAPES, SCHEMA, load_scene
 
@@ -423,3 +423,33 @@ def test_bad_mesh_file_via_cli_exits_2_with_one_line(tmp_path, name, content, me
     assert len(lines) == 1, r.stderr
     assert lines[0].startswith(f"fem-anim: error: mesh file {path}") and message in lines[0]
     assert not out.exists()
+
+
+# --- structured box (mesh.divisions) ---------------------------------------------------------
+
+@pytest.mark.parametrize("size, divisions", [([1.0, 0.2, 0.2], [5, 2, 3]), ([1.0, 0.2], [7, 3])])
+def test_structured_box_is_a_conforming_grid_of_equal_simplices(size, divisions):
+    """d! simplices per cube of equal volume, the exact total, every face shared by two
+    cells or on the boundary, and as many boundary faces as the box's sides hold."""
+    points, cells = meshes.structured_box(size, divisions, origin=[0.5, -1.0, 2.0][:len(size)])
+    d = len(size)
+    v = cell_volumes(points, cells)  # signed: every cell positively oriented
+    assert len(cells) == math.factorial(d) * math.prod(divisions)
+    assert v.min() > 0 and np.ptp(v) <= 1e-15 * v.max() * 10
+    assert abs(v.sum() - math.prod(size)) <= 1e-14 * math.prod(size)
+    assert np.allclose(points.min(axis=0), [0.5, -1.0, 2.0][:d])
+    assert np.allclose(points.max(axis=0) - points.min(axis=0), size)
+    faces = np.sort(np.concatenate([np.delete(cells, k, axis=1) for k in range(d + 1)]), axis=1)
+    _, count = np.unique(faces, axis=0, return_counts=True)
+    assert set(count) == {1, 2}  # conforming: no face is cut differently by two cells
+    n = divisions
+    sides = ([n[0] * n[1], n[1] * n[2], n[0] * n[2]] if d == 3 else [n[0], n[1]])
+    assert (count == 1).sum() == 2 * (d - 1) * sum(sides)  # 2 triangles (1 edge) per square
+
+
+def test_structured_scene_gives_the_peers_beam(tmp_path):
+    """mesh.divisions = [30, 8, 8]: the 11 520 tetrahedra of issue 18's beam, in DOLFINx."""
+    scene = scene_with("mesh.divisions=[30, 8, 8]")
+    mesh = build(scene)
+    assert mesh.mesh.topology.index_map(3).size_global == 11520
+    assert abs(volumes(mesh.points, mesh.cells).sum() - 0.04) <= 1e-15
