@@ -1,6 +1,6 @@
 """The ``fem-anim`` command line.
 
-    fem-anim run [SCENE.toml] [-o OUTDIR] [--set KEY=VALUE ...] [--solver NAME] [--quiet]
+    fem-anim run [SCENE.toml] [-o OUTDIR] [--set KEY=VALUE ...] [--solver NAME] [--preview] [--quiet]
                  [PETSc options ...]
     fem-anim render OUTDIR [--set render.KEY=VALUE ...] [--quiet]
     fem-anim solvers
@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--set", dest="overrides", action="append", default=[],
                      metavar="KEY=VALUE", help="override a scene key (value parsed as TOML)")
     run.add_argument("--solver", help="linear solver preset (see `fem-anim solvers`)")
+    run.add_argument("--preview", action="store_true",
+                     help="solver.mode = \"preview\": one Newton step per time step, fast and "
+                          "approximate (README \"A preview faster and better than VBD\")")
     run.add_argument("-q", "--quiet", action="store_true",
                      help="no progress bar and no summary: print only warnings and errors")
     run.add_argument("--resume", metavar="OUTDIR",
@@ -96,7 +99,9 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
 
     if args.solver is not None and not args.solver.strip():
         raise FemAnimError("--solver needs a preset name (see `fem-anim solvers`), got ''")
-    scene = load_scene(args.scene, args.overrides)  # validate before importing dolfinx
+    # --preview is solver.mode = "preview", before the --set overrides (which win)
+    overrides = (['solver.mode="preview"'] if args.preview else []) + args.overrides
+    scene = load_scene(args.scene, overrides)  # validate before importing dolfinx
     out = _output_directory(args, scene)
     from .simulation import Simulation
 

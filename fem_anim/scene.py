@@ -36,6 +36,7 @@ from .errors import SceneError
 from .errors import show_value as _show
 from .hessian import MODES as HESSIAN_MODES
 from .scene_consistency import check_consistency, check_render
+from .solver_modes import SOLVER_MODES, apply_solver_mode
 
 __all__ = ["Scene", "load_scene", "parse_override", "validate_render", "DEFAULTS", "SCHEMA",
            "default_scene_text"]
@@ -330,6 +331,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "epsv": Key(NUM, 1.0e-3, _positive),
     },
     "solver": {
+        "mode": Key(str, "exact", _one_of(SOLVER_MODES)),
         "preset": Key(str, "cholesky"),
         "method": Key(str, "newton", _one_of(NONLINEAR_METHODS)),
         "stopping": Key(str, "norm", _one_of(("norm", "decrement"))),
@@ -651,6 +653,7 @@ def load_scene(path: str | Path | None = None, overrides: list[str] = ()) -> Sce
     for item in overrides:
         key_path, value = parse_override(item)
         _apply_override(raw, key_path, value)
+    apply_solver_mode(raw)  # solver.mode fills the solver keys the scene left out
     try:
         data = _validate(raw)
     except SceneError as err:

@@ -112,7 +112,7 @@ def test_petsc_options_reach_the_solver(tmp_path):
 def test_scene_petsc_table_and_command_line_precedence(tmp_path):
     scene = tmp_path / "scene.toml"
     scene.write_text(default_scene_text().replace(
-        'preset = "cholesky"', 'preset = "cholesky"\n[solver.petsc]\nsnes_max_it = 1'))
+        'mode = "exact"', 'mode = "exact"\n[solver.petsc]\nsnes_max_it = 1'))
     # the scene's snes_max_it = 1 cannot converge a Newton step from the predictor ...
     r = run_cli(["run", str(scene), "-o", str(tmp_path / "a"), "-q",
                  "--set", "time.steps=2", "--set", "time.adaptive=false"], tmp_path)

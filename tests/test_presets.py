@@ -136,9 +136,8 @@ def test_undamped_jacobi_diverges_with_a_clean_error(tmp_path, capsys):
 def scene_with_petsc_table(tmp_path: Path, table: str) -> Path:
     path = tmp_path / "scene.toml"
     text = default_scene_text()
-    assert 'preset = "cholesky"' in text
-    path.write_text(text.replace('preset = "cholesky"',
-                                 f'preset = "cholesky"\n[solver.petsc]\n{table}'))
+    assert 'mode = "exact"' in text
+    path.write_text(text.replace('mode = "exact"', f'mode = "exact"\n[solver.petsc]\n{table}'))
     return path
 
 

@@ -105,7 +105,7 @@ def _reference(domain, scene, steps: int):
     return np.array(times), np.array(path)
 
 
-def _pbat(python: Path, domain, scene, steps: int, mode: str):
+def _pbat(python: Path, domain, scene, steps: int, mode: str, sweeps: int = VBD_SWEEPS):
     mat = scene["material"]
     points, cells = domain.points, domain.cells
     with tempfile.TemporaryDirectory() as tmp:
@@ -116,7 +116,7 @@ def _pbat(python: Path, domain, scene, steps: int, mode: str):
                  rho=mat["density"], youngs=mat["youngs_modulus"], nu=mat["poisson_ratio"],
                  gravity=np.asarray(scene["gravity"]["acceleration"], float),
                  dt=scene["time"]["dt"], steps=steps, rtol=1e-8, atol=1e-12, mode=mode,
-                 sweeps=VBD_SWEEPS)
+                 sweeps=sweeps)
         worker = Path(__file__).with_name("pbat_worker.py")
         proc = subprocess.run([str(python), str(worker), str(src), str(dst)],
                               capture_output=True, text=True, timeout=3600)

@@ -1,0 +1,185 @@
+"""fem_anim's preview and exact steps beside pbatoolkit's VBD on the peers' beam, in one run.
+
+    python -m fem_anim.bench.preview [--divisions NX,NY,NZ ...] [--steps N] [--out DIR]
+
+The beam of issue 18 and of pbatoolkit's examples: a box 1 x 0.2 x 0.2 m of NX x NY x NZ cubes
+cut into 6 tetrahedra each (``mesh.divisions``; 30 x 8 x 8 = 11 520 and 70 x 12 x 12 = 60 480
+tetrahedra by default), pinned at x = 0, hanging under gravity from rest, stable neo-Hookean
+(E = 1e5 Pa, nu = 0.3, 1000 kg/m^3), implicit Euler, dt = 1/60 s, 60 steps; the same mesh
+arrays for every solver. Compared, each on its own and one after the other in one process:
+
+* the reference: fem_anim's exact Newton with MUMPS Cholesky to its residual test
+  (||grad g|| <= max(1e-12, 1e-8 ||grad g_0||));
+* fem_anim's fastest exact configuration (``cg-icc``, ``solver.forcing = "adaptive"``);
+* ``solver.mode = "preview"`` (:mod:`fem_anim.solver_modes`) and the other budgets of the
+  front (:data:`CONFIGS`);
+* pbatoolkit's vertex block descent (Chen et al. 2024) at each of :data:`VBD_SWEEPS` sweeps
+  per step (:mod:`fem_anim.bench.pbat_worker`, in pbatoolkit's own virtual environment).
+
+Accuracy is the tip (mean displacement of the vertices at x = 1) against the reference's:
+its deviation at t = 0.5 s and t = 1 s and the largest over the run ("trajectory"), each
+relative to the reference tip's largest displacement. Time is the mean wall time of steps
+2..N; ratios to VBD are taken from the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FemAnimError
+
+__all__ = ["CONFIGS", "SIZES", "VBD_SWEEPS", "compare", "main", "preview_table", "tip_errors"]
+
+SIZES = ((30, 8, 8), (70, 12, 12))
+VBD_SWEEPS = (20, 100)
+#: Scene keys shared by every fem_anim run (pbatoolkit's model and step).
+BEAM = ['material.model="stable_neohookean"', 'time.integrator="implicit_euler"',
+        "time.dt=0.016666666666666666", "output.render=false"]
+REFERENCE = "fem_anim exact, cholesky (reference)"
+#: fem_anim's configurations after the reference: (label, preset or None, scene keys).
+CONFIGS = (
+    ("fem_anim exact, cg-icc, forcing adaptive", "cg-icc", ['solver.forcing="adaptive"']),
+    ("fem_anim budget 2, cg-icc, forcing adaptive", "cg-icc",
+     ["solver.max_iterations=2", 'solver.on_budget="accept"', 'solver.forcing="adaptive"']),
+    ('fem_anim preview (solver.mode = "preview")', None, ['solver.mode="preview"']),
+    ("fem_anim preview, forcing adaptive", None,
+     ['solver.mode="preview"', 'solver.forcing="adaptive"']),
+)
+TIMES = (0.5, 1.0)
+
+
+def tip_errors(tip: np.ndarray, reference: np.ndarray, dt: float) -> list[float]:
+    """Tip deviations at :data:`TIMES` (NaN past the run) and over the whole run.
+
+    Each is the largest component of ``tip - reference`` at that step, relative to the
+    reference tip's largest displacement component over the run.
+    """
+    n = min(len(tip), len(reference))
+    scale = float(np.abs(reference).max())
+    deviation = np.abs(np.asarray(tip[:n]) - np.asarray(reference[:n])).max(axis=1) / scale
+    at = [float(deviation[k - 1]) if 1 <= (k := round(t / dt)) <= n else float("nan")
+          for t in TIMES]
+    return [*at, float(deviation.max())]
+
+
+def compare(divisions, steps: int, python: Path | None, log=print, configs=CONFIGS,
+            sweeps=VBD_SWEEPS) -> list[list]:
+    """Rows [solver, tets, s/step, steps/s, Newton its/step, tip errors..., vs VBD] for one
+    mesh."""
+    from mpi4py import MPI
+
+    from ..mesh import build_mesh
+    from ..scene import load_scene
+    from .peers import _fem_anim, _pbat
+
+    keys = [*BEAM, f"mesh.divisions={list(divisions)}", f"time.steps={steps}"]
+    scene = load_scene(None, keys)
+    dt = scene["time"]["dt"]
+    domain = build_mesh(MPI.COMM_SELF, scene)
+    runs = {}
+    for label, preset, extra in (("", "cholesky", []), *configs):
+        times, tip, r = _fem_anim(load_scene(None, [*keys, *extra]), preset, steps)
+        its = float(np.mean([s["newton_its"] for s in r["steps"]]))
+        runs[label or REFERENCE] = (times, tip, its)
+        log(f"  {r['tets']} tets {label or REFERENCE}: {np.mean(times[1:]):.4f} s/step")
+    tets = r["tets"]
+    if python is not None:
+        for n in sweeps:
+            times, tip = _pbat(python, domain, scene, steps, "vbd", sweeps=n)
+            runs[f"pbatoolkit VBD, {n} sweeps"] = (times, tip, float(n))
+            log(f"  {tets} tets VBD {n}: {np.mean(times[1:]):.4f} s/step")
+    reference = np.asarray(runs[REFERENCE][1])
+    vbd = {n: float(np.mean(runs[f"pbatoolkit VBD, {n} sweeps"][0][1:]))
+           for n in sweeps if f"pbatoolkit VBD, {n} sweeps" in runs}
+    rows = []
+    for name, (times, tip, its) in runs.items():
+        per_step = float(np.mean(times[1:]))
+        ratios = [v / per_step for v in vbd.values()]
+        rows.append([name, tets, per_step, 1.0 / per_step, its,
+                     *tip_errors(np.asarray(tip), reference, dt), *ratios])
+    return rows
+
+
+def preview_table(out: Path, sizes=SIZES, steps: int = 60, log=print,
+                  sweeps=VBD_SWEEPS, install: bool = True) -> str:
+    """The side-by-side table, also written to ``out/preview.md``."""
+    from .peers import _load, peer_python
+    from .report import machine_text, md_table
+
+    python = peer_python(install)
+    load = _load()
+    rows = []
+    for divisions in sizes:
+        rows += compare(divisions, steps, python, log, sweeps=sweeps)
+    shown = [n for n in sweeps] if python is not None else []
+    headers = ["solver", "tets", "s/step", "steps/s", "its/step",
+               *[f"tip dev. t = {t:g} s" for t in TIMES], "trajectory dev.",
+               *[f"speed-up vs VBD-{n}" for n in shown]]
+    note = "" if python is not None else (
+        "\n\npbatoolkit could not be installed or imported here (see the message above): "
+        "fem_anim's configurations only.")
+    text = ("## Preview against VBD\n\n"
+            f"Measured {machine_text(load)}. Regenerate: `python -m fem_anim.bench.preview`.\n"
+            f"Beam 1 x 0.2 x 0.2 m of cubes cut into 6 tetrahedra, stable neo-Hookean, "
+            f"implicit Euler, dt = 1/60 s, {steps} steps from rest, the same tetrahedra for "
+            "every solver. 'tip dev.' is the tip's deviation from the reference run (fem_anim "
+            "exact Newton, Cholesky) relative to its largest displacement; 'its/step' is "
+            "Newton iterations (VBD: sweeps); 'speed-up vs VBD-n' is VBD's time per step "
+            "over the row's, measured in the same run. pbatoolkit's stable neo-Hookean "
+            "omits the log term of fem_anim's and is given lambda + mu (same rest response), "
+            "so a converged pbatoolkit step would still differ slightly from the reference."
+            "\n\n" + md_table(headers, rows) + note)
+    (out / "preview.md").write_text(text + "\n", encoding="utf-8")
+    return text
+
+
+def main(argv: list[str] | None = None) -> int:
+    from ..console import print_error
+    from ..petsc_options import init_petsc
+
+    init_petsc([])
+
+    class Parser(argparse.ArgumentParser):
+        def error(self, message):
+            raise FemAnimError(message)
+
+    p = Parser(prog="python -m fem_anim.bench.preview", description=__doc__.split("\n")[0])
+    p.add_argument("--divisions", action="append", default=[],
+                   help="cubes per axis, NX,NY,NZ (repeat for several meshes)")
+    p.add_argument("--steps", type=int, default=60)
+    p.add_argument("--sweeps", default=",".join(map(str, VBD_SWEEPS)))
+    p.add_argument("--no-install", action="store_true",
+                   help="do not install pbatoolkit if it is missing (compare fem_anim only)")
+    p.add_argument("--out", default="demos/results")
+    try:
+        args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
+        try:
+            sizes = [tuple(int(v) for v in d.split(",")) for d in args.divisions] or SIZES
+            sweeps = tuple(int(v) for v in args.sweeps.split(","))
+        except ValueError:
+            raise FemAnimError("--divisions and --sweeps take whole numbers separated by "
+                               f"commas, got {args.divisions} and {args.sweeps!r}") from None
+        if any(len(d) != 3 or min(d) < 1 for d in sizes) or min(sweeps) < 1:
+            raise FemAnimError(f"--divisions needs three numbers >= 1 each and --sweeps "
+                               f"numbers >= 1, got {args.divisions} and {args.sweeps!r}")
+        if not 2 <= args.steps <= 1000:
+            raise FemAnimError(f"--steps: must be between 2 and 1000, got {args.steps}")
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        print(preview_table(out, sizes, args.steps, sweeps=sweeps,
+                            install=not args.no_install))
+        return 0
+    except FemAnimError as err:
+        print_error(str(err))
+        return 2
+    except OSError as err:
+        print_error(f"{err.filename or 'output'}: {err.strerror}")
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
