@@ -33,7 +33,8 @@ def falling_bar(tmp_path, name="budget_bar", adaptive=True, steps=4, **solver):
     scene = scenes.bar(name, material={"youngs_modulus": 2.0e5, "poisson_ratio": 0.3,
                                        "density": 1000.0, "model": "neohookean"},
                        gravity={"acceleration": [0.0, 0.0, -9.81]},
-                       time={"integrator": "implicit_euler", "dt": DT, "steps": steps, "adaptive": adaptive},
+                       time={"integrator": "implicit_euler", "dt": DT, "steps": steps,
+                             "adaptive": adaptive},
                        output={"render": False}, solver=solver or None)
     return scenes.make_scene(tmp_path, scene)
 
