@@ -120,7 +120,8 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         at their iteration budget without meeting it (``solver.on_budget = "accept"``,
         :data:`fem_anim.solver.BUDGET_REASON`).
     """
-    from .solver import BUDGET_REASON, POLISH_FAILED_REASON  # here: importing PETSc waits for init_petsc
+    # here: importing PETSc waits for init_petsc
+    from .solver import BUDGET_REASON, POLISH_FAILED_REASON
 
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]

@@ -61,6 +61,7 @@ class HessianReuse:
         self._weight = None
         self._rest = None  # the rest state (zero displacement), for "rest"
         self._x = self._y = None  # the last iterate and its direction (the rule)
+        self._exact = None  # rest: (KSP, matrix) for exact Hessians (exact_solver)
         self._retried = False
         self._stale = False  # the last direction came from a kept Hessian
         self.assemblies = self.reused = 0  # this step's
@@ -79,6 +80,25 @@ class HessianReuse:
         self._weight = weight
         self._retried = False
         self.assemblies = self.reused = 0
+
+    def exact_solver(self, snes: PETSc.SNES, mat_type: str | None, options: dict,
+                     prefix: str) -> tuple[PETSc.KSP, PETSc.Mat] | None:
+        """``rest``: a matrix and linear solver of its own (the same PETSc options) for the
+        exact Hessians others assemble (the round-off polish, a start from the linearised
+        response), so the run's one factorisation of M + w K(X) is not overwritten; None
+        for the other modes, whose kept Hessian those simply replace (:meth:`invalidate`)."""
+        if self.mode != "rest":
+            return None
+        if self._exact is None:
+            from .petsc_options import options_in_database
+
+            A = self.problem.create_matrix(mat_type)
+            ksp = PETSc.KSP().create(snes.getComm())
+            ksp.setOptionsPrefix(prefix)
+            with options_in_database(prefix, options):
+                ksp.setFromOptions()
+            self._exact = (ksp, A)
+        return self._exact
 
     def invalidate(self) -> None:
         """Another Hessian was assembled into the matrix (the polish, a start): rebuild."""
@@ -138,6 +158,6 @@ class HessianReuse:
         return True
 
     def destroy(self) -> None:
-        for v in (self._rest, self._x, self._y):
+        for v in (self._rest, self._x, self._y) + (self._exact or ()):
             if v is not None:
                 v.destroy()

@@ -475,17 +475,28 @@ class Minimiser:
                     assemble_hessian: bool = True) -> float:
         """The full Newton step H(x)^-1 r into ``step``, for the residual ``r`` at x.
 
-        ``assemble_hessian=False`` reuses the last Hessian and its factorisation.
+        ``assemble_hessian=False`` reuses the last Hessian and its factorisation; with
+        ``hessian_update = "rest"`` an assembled one goes to a solver of its own
+        (:meth:`fem_anim.hessian_reuse.HessianReuse.exact_solver`).
 
         Returns:
             The Newton decrement lambda^2/2 = r . step / 2 (seed definition 4).
         """
-        ksp = self.snes.getKSP()
+        ksp, A = self.snes.getKSP(), self.A
         if assemble_hessian:
-            self.reuse.invalidate()  # the kept Hessian is overwritten
-            self.problem.jacobian(self.snes, x, self.A, self.A)
-            ksp.setOperators(self.A, self.A)
-        ksp.solve(r, step)
+            apart = self.reuse.exact_solver(self.snes, self.options.get("mat_type") or None,
+                                            self.options, self.prefix)
+            if apart is None:
+                self.reuse.invalidate()  # the kept Hessian is overwritten
+            else:
+                ksp, A = apart
+            self.problem.jacobian(self.snes, x, A, A)
+            ksp.setOperators(A, A)
+        if ksp is self.snes.getKSP():
+            ksp.solve(r, step)
+        else:
+            with options_in_database(self.prefix, self.options):  # MUMPS reads its own here
+                ksp.solve(r, step)
         return 0.5 * abs(r.dot(step))
 
     def _polish(self, x: PETSc.Vec, max_steps: int = 5,

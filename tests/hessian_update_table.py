@@ -61,10 +61,9 @@ def main() -> None:
     reference = None
     for label, keys in OPTIONS:
         overrides = args.overrides + [f"solver.{k}={v}" for k, v in keys.items()]
-        scene = load_scene(args.scene, overrides)
-        try:
-            u, rows, _ = run(scene, args.steps)
-        except Exception as err:  # a failing option is a row of the table too
+        try:  # a refused combination or a failing option is a row of the table too
+            u, rows, _ = run(load_scene(args.scene, overrides), args.steps)
+        except Exception as err:
             print(f"| {label} | failed: {str(err)[:80]} | | | | | |")
             continue
         n = len(rows)

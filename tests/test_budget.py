@@ -33,7 +33,8 @@ def falling_bar(tmp_path, name="budget_bar", adaptive=True, steps=4, **solver):
     scene = scenes.bar(name, material={"youngs_modulus": 2.0e5, "poisson_ratio": 0.3,
                                        "density": 1000.0, "model": "neohookean"},
                        gravity={"acceleration": [0.0, 0.0, -9.81]},
-                       time={"integrator": "implicit_euler", "dt": DT, "steps": steps, "adaptive": adaptive},
+                       time={"integrator": "implicit_euler", "dt": DT, "steps": steps,
+                             "adaptive": adaptive},
                        output={"render": False}, solver=solver or None)
     return scenes.make_scene(tmp_path, scene)
 
@@ -161,3 +162,17 @@ def test_bad_budget_keys_exit_2(tmp_path, capsys, solver, message):
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("fem-anim: error: ") and message in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_budget_covers_auto_restarts(tmp_path):
+    """hessian = "auto" with CG continues a failed solve filtered (a restart): the budget
+    counts the iterations of every restart (the crushed cube of test_solver_menu)."""
+    from test_solver_menu import squash
+    solver = 'preset = "cg-icc"\nmax_iterations = 3\non_budget = "accept"'
+    sim = squash(tmp_path, hessian="auto", solver=solver)
+    state, restarts = sim.initial_state(), 0
+    for _ in range(4):
+        state, stats = sim.step(state, 0.05)
+        restarts += sim.minimiser.hessian.restarts
+        assert stats.newton_its == 3 and stats.reason == BUDGET_REASON
+    assert restarts >= 1  # measured: 2 (steps 1 and 3)

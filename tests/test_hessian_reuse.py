@@ -83,7 +83,7 @@ def test_a_new_time_step_rebuilds_the_rest_hessian(tmp_path):
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("name", ["lagged", "rest_lbfgs"])
+@pytest.mark.parametrize("name", ["every_step", "lagged", "rest_lbfgs"])
 def test_kept_hessian_under_mpi_equals_serial(tmp_path, name):
     from test_mpi_runs import assert_same_run, run
     if mpirun_command(2) is None:
