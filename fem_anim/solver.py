@@ -482,7 +482,7 @@ class Minimiser:
         Returns:
             The Newton decrement lambda^2/2 = r . step / 2 (seed definition 4).
         """
-        ksp, A = self.snes.getKSP(), self.A
+        ksp, A, apart = self.snes.getKSP(), self.A, None
         if assemble_hessian:
             apart = self.reuse.exact_solver(self.snes, self.options.get("mat_type") or None,
                                             self.options, self.prefix)
@@ -492,7 +492,7 @@ class Minimiser:
                 ksp, A = apart
             self.problem.jacobian(self.snes, x, A, A)
             ksp.setOperators(A, A)
-        if ksp is self.snes.getKSP():
+        if apart is None:
             ksp.solve(r, step)
         else:
             with options_in_database(self.prefix, self.options):  # MUMPS reads its own here
