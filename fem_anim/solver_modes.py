@@ -7,14 +7,19 @@ fills nothing: Newton to the residual test of the preset (seed section 3.2, eq. 
 ``"preview"`` is one Newton step per time step, accepted unconverged when it decreased the
 step objective (``max_iterations = 1``, ``on_budget = "accept"``: the linearly implicit step
 of Baraff and Witkin, seed eq. 10 taken once from the predictor), solved by conjugate
-gradients with incomplete Cholesky (``cg-icc``). It was chosen from the speed/accuracy front
+gradients with incomplete Cholesky (``cg-icc``), with ``hessian = "auto"``: the exact
+Hessian, filtered only when CG meets negative curvature (a bent 60k-tetrahedron beam's
+Hessian is indefinite from t ~ 0.5 s: with the exact Hessian alone CG fails there and the
+step with it). It was chosen from the speed/accuracy front
 of the trade study (README "A preview faster and better than VBD";
 ``python -m fem_anim.bench.preview``): on the peers' beam of 11 520 tetrahedra it runs
 about 2.5x faster than the fastest exact configuration, with the tip within ~1e-3 of the
 exact trajectory, where pbatoolkit's VBD at 20 sweeps is both slower and tens of percent
 off. Every step it accepts without meeting the residual test is marked in stats.csv
 (reason 7, ``residual_ratio``), so the inexactness is visible. A mixed (u, p) scene keeps
-its saddle-point preset.
+its saddle-point preset and exact Hessian; a scene whose regions use several material models,
+or that names another ``method`` or a ``hessian_update``, keeps the exact Hessian (``auto``
+filters one model's tangent, and a kept Hessian is never filtered).
 """
 
 from __future__ import annotations
@@ -26,7 +31,8 @@ __all__ = ["SOLVER_MODES", "apply_solver_mode"]
 #: ``solver.mode`` -> the ``[solver]`` keys it fills when the scene leaves them out.
 SOLVER_MODES: dict[str, dict[str, Any]] = {
     "exact": {},
-    "preview": {"max_iterations": 1, "on_budget": "accept", "preset": "cg-icc"},
+    "preview": {"max_iterations": 1, "on_budget": "accept", "preset": "cg-icc",
+                "hessian": "auto"},
 }
 
 
@@ -40,7 +46,23 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
         return
     element = raw.get("element")
     mixed = isinstance(element, dict) and element.get("formulation") == "mixed"
+    keep_exact = mixed or solver.get("method", "newton") != "newton" or \
+        solver.get("hessian_update", "every_iteration") != "every_iteration" or \
+        _several_models(raw)
     for key, value in SOLVER_MODES[solver["mode"]].items():
         if key == "preset" and mixed:
             continue  # the saddle point needs ldlt, lu or schur (fem_anim.mixed)
+        if key == "hessian" and keep_exact:
+            continue
         solver.setdefault(key, value)
+
+
+def _several_models(raw: dict[str, Any]) -> bool:
+    """Whether a body's regions give a material model of their own (raw scene tables)."""
+    bodies = raw.get("body") if isinstance(raw.get("body"), list) else [raw]
+    for body in bodies:
+        regions = body.get("region") if isinstance(body, dict) else None
+        if isinstance(regions, list) and any(isinstance(r, dict) and "model" in r
+                                             for r in regions):
+            return True
+    return False

@@ -18,7 +18,7 @@ from fem_anim.bench.preview import tip_errors
 from fem_anim.bench.worker import measure
 from fem_anim.cli import main
 from fem_anim.errors import SceneError
-from fem_anim.scene import load_scene
+from fem_anim.scene import default_scene_text, load_scene
 from fem_anim.solver import BUDGET_REASON, CONVERGED_REASONS
 from fem_anim.solver_modes import SOLVER_MODES
 
@@ -51,9 +51,23 @@ def test_a_mixed_scene_keeps_its_saddle_point_preset():
                               'element.formulation="mixed"', 'solver.preset="ldlt"',
                               'material.model="neohookean"'])
     assert scene["solver"]["preset"] == "ldlt" and scene["solver"]["max_iterations"] == 1
+    assert scene["solver"]["hessian"] == "exact"  # the saddle point is never filtered
     unset = load_scene(None, ['solver.mode="preview"', "element.degree=2",
                               'element.formulation="mixed"'])
     assert unset["solver"]["preset"] != "cg-icc"
+
+
+def test_several_models_or_a_kept_hessian_keep_the_exact_hessian(tmp_path):
+    """auto filters one material model's tangent; a kept Hessian is never filtered."""
+    region = '\n[[region]]\nname = "half"\nmin = [0.0, -1.0, -1.0]\nmax = [0.5, 1.0, 1.0]\n'
+    path = tmp_path / "regions.toml"
+    path.write_text(default_scene_text() + region + 'model = "stvk"\n')
+    scene = load_scene(path, ['solver.mode="preview"'])
+    assert scene["solver"]["hessian"] == "exact" and scene["solver"]["max_iterations"] == 1
+    path.write_text(default_scene_text() + region + "youngs_modulus = 1e6\n")
+    assert load_scene(path, ['solver.mode="preview"'])["solver"]["hessian"] == "auto"
+    kept = load_scene(None, ['solver.mode="preview"', 'solver.hessian_update="every_step"'])
+    assert kept["solver"]["hessian"] == "exact"
 
 
 def test_unknown_mode_is_one_line(capsys):
