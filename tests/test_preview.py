@@ -121,3 +121,23 @@ def test_preview_bench_reduced(tmp_path, capsys):
 def test_preview_bench_bad_arguments(tmp_path, capsys):
     assert preview_main(["--divisions", "6,2", "--out", str(tmp_path)]) == 2
     assert "--divisions needs three numbers" in capsys.readouterr().err
+
+
+@pytest.mark.mpi
+def test_preview_under_mpi_equals_serial(tmp_path):
+    """The preview on 2 ranks (block-Jacobi ICC, auto's collective choice) is the serial run
+    to CG's tolerance: one Newton step per frame on both."""
+    from conftest import mpirun_command
+    from test_mpi_runs import assert_same_run, run
+
+    if mpirun_command(2) is None:
+        pytest.skip("mpirun not available")
+    args = ["run", "-q", "--preview", "--set", "time.steps=4", "--set", "mesh.element_size=0.1",
+            "--set", "output.render=false"]
+    for n in (1, 2):
+        r = run([*args, "-o", str(tmp_path / f"n{n}")], tmp_path, n)
+        assert r.returncode == 0, r.stderr
+    assert_same_run(tmp_path / "n1", tmp_path / "n2")
+    rows = [read_stats(tmp_path / f"n{n}" / "stats.csv") for n in (1, 2)]
+    assert [int(r["newton_its"]) for r in rows[0]] == [int(r["newton_its"]) for r in rows[1]] \
+        == [1] * 4
