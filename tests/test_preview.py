@@ -44,6 +44,8 @@ def test_explicit_keys_win_over_the_preview():
     assert scene["solver"]["max_iterations"] == 3
     assert scene["solver"]["preset"] == "cholesky"
     assert scene["solver"]["on_budget"] == "accept"
+    nested = load_scene(None, ['solver.mode="preview"', "solver.petsc.ksp.rtol=1e-6"])
+    assert nested["solver"]["petsc"] == {"ksp": {"rtol": 1e-6}}  # not a second ksp_rtol
 
 
 def test_a_mixed_scene_keeps_its_saddle_point_preset():
