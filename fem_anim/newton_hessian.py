@@ -11,8 +11,12 @@ trust-region ratio) are in :mod:`fem_anim.hessian`; this module is the state a
 * ``trust_region_filter``: clamp or abs per iteration from the ratio rho of the previous
   step's actual to predicted decrease under the unprojected model;
 * ``auto``: exact while the factorisation's inertia shows no negative pivot, else the
-  trust-region filter's choice; with Krylov presets, a failed solve or line search makes
-  :meth:`HessianChoice.restart` continue the step filtered from its last iterate.
+  trust-region filter's choice; with CG (Krylov presets) the iteration is truncated Newton-CG
+  (Steihaug 1983; Nocedal & Wright, Algorithm 7.1): CG stopped by negative curvature
+  (``DIVERGED_INDEFINITE_MAT``) leaves its last iterate, a descent direction, and SNES takes
+  it (``SNESSetMaxLinearSolveFailures``); only when that direction fails too (zero after a
+  first negative curvature, or the line search fails) does :meth:`HessianChoice.restart`
+  continue the step filtered from its last iterate.
 
 Each step's iterations are counted per kind of Hessian (:data:`HESSIAN_KINDS`).
 """
@@ -65,15 +69,22 @@ class HessianChoice:
         self._filtered = False  # auto: this step met an indefinite Hessian
         self._no_exact = False  # auto: ... shown by a failed Krylov solve or line search
         self.restarts = 0
+        self.truncated = 0  # auto with CG: this step's solves stopped at negative curvature
         self._last_iterate = None
         self._inertia = True  # whether the factorisation reports its inertia (auto)
+        self._truncated = None  # auto: whether CG's truncated iterates are taken (first use)
 
     def start_step(self) -> None:
         """Forget the previous step: counts, model, auto's state."""
         self.its = Counter()
         self.drop_model()
         self._filtered = self._no_exact = False
-        self.restarts = 0
+        self.restarts = self.truncated = 0
+
+    def solved(self) -> None:
+        """After each SNES solve: count the truncated CG directions it took (``auto``)."""
+        if self._truncated:
+            self.truncated += self.snes.getLinearSolveFailures()
 
     def restart(self, reason: int, stalled: bool, x: PETSc.Vec) -> bool:
         """Whether ``auto`` continues a failed SNES solve filtered; if so x is reset.
@@ -186,6 +197,8 @@ class HessianChoice:
         """
         rho = self._model_ratio(x)
         problem = self.problem
+        if self.mode == "auto" and self._truncated is None:
+            self._truncate_cg()
         if self.mode == "trust_region_filter":
             how = trust_region_choice(rho)
         else:
@@ -203,6 +216,22 @@ class HessianChoice:
             problem.set_hessian_filter(how)
             problem.jacobian(snes, x, A, P)
         self.its[how or "exact"] += 1
+
+    def _truncate_cg(self) -> None:
+        """``auto`` with CG: Newton takes CG's iterate when CG meets negative curvature.
+
+        PETSc's KSPCG (3.18 and 3.22) stops at p^T H p <= 0 before updating x, so x holds the
+        last iterate x_j = sum_i a_i p_i of conjugate directions with positive curvature,
+        started from 0: r^T x_j < 0, a descent direction for g (Nocedal & Wright, Theorem
+        7.2 with a symmetric positive definite preconditioner). SNES counts such a solve
+        as a failure and stops at ``snes_max_linear_solve_fail`` of them (default 1):
+        raising the limit makes it take the iterate; the line search on g and the stopping
+        test of every accepted step are unchanged. A zero iterate (negative curvature at
+        CG's first direction) fails the line search and :meth:`restart` takes over.
+        """
+        self._truncated = self.snes.getKSP().getType() == "cg"
+        if self._truncated:
+            self.snes.setMaxLinearSolveFailures(1 << 30)
 
     def enable_inertia(self, A: PETSc.Mat) -> None:
         """Ask MUMPS's Cholesky for the inertia of its factors (``auto``).

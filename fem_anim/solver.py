@@ -219,6 +219,7 @@ class Minimiser:
             reason = self.snes.getConvergedReason()
             newton_its += self.snes.getIterationNumber()
             linear_its += self.snes.getLinearSolveIterations()
+            self.hessian.solved()
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)
             if self.hessian.restart(reason, stalled, x):
