@@ -189,8 +189,9 @@ class HessianChoice:
         positive definite; else the trust-region filter's choice. With a Cholesky
         factorisation every iteration assembles the exact Hessian first and reads the
         inertia of its factorisation (kept for the solve when it has no negative pivot).
-        Krylov presets show an indefinite Hessian only by a failed solve or line search
-        (:meth:`solve`), after which the step continues filtered: abs, or exact again
+        With CG an indefinite Hessian gives a truncated direction (:meth:`_truncate_cg`);
+        other Krylov methods, and a truncated direction that fails the line search, show
+        it by a failed SNES solve, after which the step continues filtered: abs, or exact again
         where the trust-region filter would clamp (the exact model is accurate there;
         should CG fail again, the step continues filtered, at most
         :data:`MAX_AUTO_RESTARTS` times).
