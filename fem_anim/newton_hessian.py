@@ -90,8 +90,7 @@ class HessianChoice:
         """Whether ``auto`` continues a failed SNES solve filtered; if so x is reset.
 
         After CG's negative curvature or a failed line search (not at the objective's
-        round-off, ``stalled``, unless the direction was a truncated CG iterate: then a
-        stall, or a stop at the round-off floor, restarts too), at most
+        round-off, ``stalled``, unless the direction was a truncated CG iterate), at most
         :data:`MAX_AUTO_RESTARTS` times per step, the step goes on from its last iterate
         with the trust-region filter's Hessian.
         """
@@ -99,9 +98,8 @@ class HessianChoice:
         # (measured: step 55 of the 55k beam kept at ||r|| / ||r_0|| = 0.1 by the polish)
         truncated = bool(self._truncated) and \
             self.snes.getKSP().getConvergedReason() < 0
-        if self.mode != "auto" or (stalled and not truncated) or \
-                (reason not in _AUTO_RESTART and not stalled) or \
-                self.restarts >= MAX_AUTO_RESTARTS or self._last_iterate is None:
+        if self.mode != "auto" or reason not in _AUTO_RESTART or (stalled and not truncated) \
+                or self.restarts >= MAX_AUTO_RESTARTS or self._last_iterate is None:
             return False
         self.restarts += 1
         self._filtered = self._no_exact = True

@@ -222,7 +222,7 @@ class Minimiser:
             self.hessian.solved()
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)
-            if self.hessian.restart(reason, stalled or reason == ROUNDOFF_REASON, x):
+            if self.hessian.restart(reason, stalled, x):
                 # the exact Hessian was indefinite where no inertia showed it: continue from
                 # the last iterate filtered (trust-region choice; the same stopping test)
                 self._restarting = True
