@@ -11,8 +11,12 @@ trust-region ratio) are in :mod:`fem_anim.hessian`; this module is the state a
 * ``trust_region_filter``: clamp or abs per iteration from the ratio rho of the previous
   step's actual to predicted decrease under the unprojected model;
 * ``auto``: exact while the factorisation's inertia shows no negative pivot, else the
-  trust-region filter's choice; with Krylov presets, a failed solve or line search makes
-  :meth:`HessianChoice.restart` continue the step filtered from its last iterate.
+  trust-region filter's choice; with CG (Krylov presets) the iteration is truncated Newton-CG
+  (Steihaug 1983; Nocedal & Wright, Algorithm 7.1): CG stopped by negative curvature
+  (``DIVERGED_INDEFINITE_MAT``) leaves its last iterate, a descent direction, and SNES takes
+  it (``SNESSetMaxLinearSolveFailures``); only when that direction fails too (zero after a
+  first negative curvature, or the line search fails) does :meth:`HessianChoice.restart`
+  continue the step filtered from its last iterate.
 
 Each step's iterations are counted per kind of Hessian (:data:`HESSIAN_KINDS`).
 """
@@ -65,25 +69,37 @@ class HessianChoice:
         self._filtered = False  # auto: this step met an indefinite Hessian
         self._no_exact = False  # auto: ... shown by a failed Krylov solve or line search
         self.restarts = 0
+        self.truncated = 0  # auto with CG: this step's solves stopped at negative curvature
         self._last_iterate = None
         self._inertia = True  # whether the factorisation reports its inertia (auto)
+        self._truncated = None  # auto: whether CG's truncated iterates are taken (first use)
 
     def start_step(self) -> None:
         """Forget the previous step: counts, model, auto's state."""
         self.its = Counter()
         self.drop_model()
         self._filtered = self._no_exact = False
-        self.restarts = 0
+        self.restarts = self.truncated = 0
+
+    def solved(self) -> None:
+        """After each SNES solve: count the truncated CG directions it took (``auto``)."""
+        if self._truncated:
+            self.truncated += self.snes.getLinearSolveFailures()
 
     def restart(self, reason: int, stalled: bool, x: PETSc.Vec) -> bool:
         """Whether ``auto`` continues a failed SNES solve filtered; if so x is reset.
 
         After CG's negative curvature or a failed line search (not at the objective's
-        round-off, ``stalled``), at most :data:`MAX_AUTO_RESTARTS` times per step, the step
-        goes on from its last iterate with the trust-region filter's Hessian.
+        round-off, ``stalled``, unless the direction was a truncated CG iterate), at most
+        :data:`MAX_AUTO_RESTARTS` times per step, the step goes on from its last iterate
+        with the trust-region filter's Hessian.
         """
-        if self.mode != "auto" or reason not in _AUTO_RESTART or stalled or \
-                self.restarts >= MAX_AUTO_RESTARTS or self._last_iterate is None:
+        # a line search stalled on a truncated CG direction is that direction's fault
+        # (measured: step 55 of the 55k beam kept at ||r|| / ||r_0|| = 0.1 by the polish)
+        truncated = bool(self._truncated) and \
+            self.snes.getKSP().getConvergedReason() < 0
+        if self.mode != "auto" or reason not in _AUTO_RESTART or (stalled and not truncated) \
+                or self.restarts >= MAX_AUTO_RESTARTS or self._last_iterate is None:
             return False
         self.restarts += 1
         self._filtered = self._no_exact = True
@@ -178,14 +194,17 @@ class HessianChoice:
         positive definite; else the trust-region filter's choice. With a Cholesky
         factorisation every iteration assembles the exact Hessian first and reads the
         inertia of its factorisation (kept for the solve when it has no negative pivot).
-        Krylov presets show an indefinite Hessian only by a failed solve or line search
-        (:meth:`solve`), after which the step continues filtered: abs, or exact again
+        With CG an indefinite Hessian gives a truncated direction (:meth:`_truncate_cg`);
+        other Krylov methods, and a truncated direction that fails the line search, show
+        it by a failed SNES solve, after which the step continues filtered: abs, or exact again
         where the trust-region filter would clamp (the exact model is accurate there;
         should CG fail again, the step continues filtered, at most
         :data:`MAX_AUTO_RESTARTS` times).
         """
         rho = self._model_ratio(x)
         problem = self.problem
+        if self.mode == "auto" and self._truncated is None:
+            self._truncate_cg()
         if self.mode == "trust_region_filter":
             how = trust_region_choice(rho)
         else:
@@ -203,6 +222,22 @@ class HessianChoice:
             problem.set_hessian_filter(how)
             problem.jacobian(snes, x, A, P)
         self.its[how or "exact"] += 1
+
+    def _truncate_cg(self) -> None:
+        """``auto`` with CG: Newton takes CG's iterate when CG meets negative curvature.
+
+        PETSc's KSPCG (3.18 and 3.22) stops at p^T H p <= 0 before updating x, so x holds the
+        last iterate x_j = sum_i a_i p_i of conjugate directions with positive curvature,
+        started from 0: r^T x_j < 0, a descent direction for g (Nocedal & Wright, Theorem
+        7.2 with a symmetric positive definite preconditioner). SNES counts such a solve
+        as a failure and stops at ``snes_max_linear_solve_fail`` of them (default 1):
+        raising the limit makes it take the iterate; the line search on g and the stopping
+        test of every accepted step are unchanged. A zero iterate (negative curvature at
+        CG's first direction) fails the line search and :meth:`restart` takes over.
+        """
+        self._truncated = self.snes.getKSP().getType() == "cg"
+        if self._truncated:
+            self.snes.setMaxLinearSolveFailures(1 << 30)
 
     def enable_inertia(self, A: PETSc.Mat) -> None:
         """Ask MUMPS's Cholesky for the inertia of its factors (``auto``).

@@ -257,6 +257,7 @@ class Minimiser:
             reason = self.snes.getConvergedReason()
             newton_its += self.snes.getIterationNumber()
             linear_its += self.snes.getLinearSolveIterations()
+            self.hessian.solved()
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)
             spent = self.budget is not None and newton_its >= self.budget

@@ -70,6 +70,28 @@ def test_auto_converges_on_the_crushed_cube_where_exact_fails(tmp_path):
     assert total <= 40, counts
 
 
+def test_auto_with_cg_takes_truncated_newton_directions(tmp_path):
+    """cg-icc on the coarse crushed cube: CG meets negative curvature at step 1, where exact
+    Newton stops (``DIVERGED_LINEAR_SOLVE``). auto takes CG's last iterate instead
+    (truncated Newton-CG, Nocedal & Wright Alg. 7.1) and finishes step 1 with the exact
+    Hessian alone; every step meets the unchanged stopping test (a positive SNES reason)."""
+    cg = 'preset = "cg-icc"'
+    with pytest.raises(ConvergenceError, match="DIVERGED_LINEAR_SOLVE"):
+        run_steps(squash(tmp_path, hessian="exact", element_size=0.1, solver=cg), 1, 0.05)
+    sim = squash(tmp_path, hessian="auto", element_size=0.1, solver=cg)
+    state = sim.initial_state()
+    truncated = []
+    for step in range(4):
+        state, stats = sim.step(state, 0.05)
+        assert stats.reason > 0
+        truncated.append(sim.minimiser.hessian.truncated)
+        if step == 0:  # measured: 7 iterations, one of them truncated
+            assert _kinds(stats) == {"exact": stats.newton_its}
+    assert truncated[0] >= 1, truncated
+    press = state.u.reshape(-1, 3)[sim.problem.moving_pins[0].dofs, 2]
+    assert press == pytest.approx(-0.17)
+
+
 @pytest.mark.parametrize("hessian", ["abs", "trust_region_filter"])
 def test_filtered_modes_crush_the_cube_with_a_filtered_hessian_only(tmp_path, hessian):
     sim = squash(tmp_path, hessian=hessian, element_size=0.1)
