@@ -1,6 +1,6 @@
 """Stability at the extremes: what each hard scene is expected to do, and what it does.
 
-    fem-anim bench --extremes [--full] [-o TABLE.md]
+    fem-anim bench --extremes [--full] [--set KEY=VALUE ...] [--no-locking] [-o TABLE.md]
 
 Each :class:`Case` is a scene pushed to an extreme (Young's modulus 1e2 to 1e9 Pa,
 Poisson ratio up to 0.4999, dt from 1e-5 to 1 s, a spinning body, a stretched and a
@@ -238,12 +238,13 @@ def _aspect_ratio(points: np.ndarray, cells: np.ndarray) -> float:
     return float(np.max(longest / height))
 
 
-def _load(data: dict):
-    """Validate a scene dictionary exactly as a file (each rank reads its own copy)."""
+def _load(data: dict, overrides: list[str] = ()):
+    """Validate a scene dictionary exactly as a file, with ``--set KEY=VALUE`` overrides
+    (each rank reads its own copy)."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "case.toml"
         path.write_text(scene_text(data))
-        return load_scene(path)
+        return load_scene(path, list(overrides))
 
 
 def _volume_change(sim, state) -> float | None:
@@ -255,8 +256,11 @@ def _volume_change(sim, state) -> float | None:
     return float(cell_volumes(x + u, cells).sum() / cell_volumes(x, cells).sum() - 1.0)
 
 
-def run_case(case: Case, comm=None) -> Outcome:
-    """Run a case to its end or its error and classify what happened."""
+def run_case(case: Case, comm=None, overrides: list[str] = ()) -> Outcome:
+    """Run a case to its end or its error and classify what happened.
+
+    ``overrides`` are ``KEY=VALUE`` strings applied to the case's scene as ``fem-anim run
+    --set`` does (e.g. ``solver.hessian=auto``)."""
     from mpi4py import MPI
 
     from ..energy import energy_report, initial_energies
@@ -264,7 +268,7 @@ def run_case(case: Case, comm=None) -> Outcome:
 
     comm = comm or MPI.COMM_WORLD
     data = case.keys | {"time": case.keys["time"] | {"steps": case.steps}}
-    scene = _load(data)
+    scene = _load(data, overrides)
     start = time.perf_counter()
     sim = Simulation(scene, comm, {})
     info = {"dofs": sim.problem.V.dofmap.index_map.size_global * sim.problem.d}
@@ -438,6 +442,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--full", action="store_true", help="the 3D grid (minutes)")
     parser.add_argument("-o", "--output", help="also write the table to this markdown file")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE", help="override a scene key in every case")
+    parser.add_argument("--no-locking", action="store_true", help="the grid only, no locking study")
     args, unknown = parser.parse_known_args(argv)
     if unknown:
         print_error(f"bench --extremes: unrecognized arguments: {' '.join(unknown)}")
@@ -446,11 +453,12 @@ def main(argv: list[str]) -> int:
     try:
         results = []
         for case in cases(args.full):
-            results.append((case, run_case(case)))
+            results.append((case, run_case(case, overrides=args.overrides)))
             if MPI.COMM_WORLD.rank == 0 and not args.quiet:
                 print(f"extremes: {case.name}: {results[-1][1].measured} "
                       f"({results[-1][1].seconds:.1f} s)", file=sys.stderr, flush=True)
-        locking = locking_rows(args.full) + mixed_locking_rows(args.full)
+        locking = [] if args.no_locking else \
+            locking_rows(args.full) + mixed_locking_rows(args.full)
     except FemAnimError as err:
         print_error(str(err))
         return 2
