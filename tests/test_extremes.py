@@ -9,6 +9,7 @@ terminal reporter) and is what ``fem-anim bench --extremes [--full]`` prints.
 import pytest
 
 import copy
+import re
 
 from fem_anim.bench.extremes import (FINISHES, cases, expected_outcome, format_table,
                                      locking_rows, matches, pin_displacement, pinned_gaps,
@@ -36,6 +37,11 @@ def _check(case, table, tier):
     assert matches(case.expected, outcome.measured), outcome.detail
     if outcome.measured == "stops-with-message":
         assert "reduce time.dt" in outcome.detail or "min_dt" in outcome.detail, outcome.detail
+        # it stops because the gap closes: where it stops, less than an element size is left
+        t = float(re.search(r"t = ([0-9.e+-]+) s", outcome.detail).group(1))
+        keys = case.keys  # the gaps at times 0 and t: one "step" of length t
+        gaps = pinned_gaps(keys | {"time": keys["time"] | {"dt": t}}, 1)
+        assert min(g["smallest"] for g in gaps) < keys["mesh"]["element_size"], outcome.detail
     else:
         assert outcome.info["newton_its"] >= case.steps
     if case.name.startswith("thin"):
