@@ -51,8 +51,8 @@ from ..mesh import cell_volumes
 from ..scene import load_scene
 
 __all__ = ["Case", "Outcome", "cases", "run_case", "locking_rows", "mixed_locking_rows",
-           "format_table", "main", "scene_text", "OUTCOMES", "COMPLETED", "ENERGY_GROWTH_BOUND", "FINISHES",
-           "sag_bound", "expected_outcome", "matches", "pin_displacement", "pinned_gaps"]
+           "format_table", "main", "scene_text", "OUTCOMES", "COMPLETED", "ENERGY_GROWTH_BOUND",
+           "FINISHES", "sag_bound", "expected_outcome", "matches", "pin_displacement", "pinned_gaps"]
 
 OUTCOMES = ("converges-bounded", "recovers-by-substepping", "stops-with-message")
 
