@@ -52,7 +52,8 @@ from ..scene import load_scene
 
 __all__ = ["Case", "Outcome", "cases", "run_case", "locking_rows", "mixed_locking_rows",
            "format_table", "main", "scene_text", "OUTCOMES", "COMPLETED", "ENERGY_GROWTH_BOUND",
-           "FINISHES", "sag_bound", "expected_outcome", "matches", "pin_displacement", "pinned_gaps"]
+           "FINISHES", "sag_bound", "expected_outcome", "matches", "pin_displacement",
+           "pinned_gaps"]
 
 OUTCOMES = ("converges-bounded", "recovers-by-substepping", "stops-with-message")
 
@@ -61,8 +62,9 @@ OUTCOMES = ("converges-bounded", "recovers-by-substepping", "stops-with-message"
 COMPLETED = ("converges-bounded", "recovers-by-substepping", "fails the physical check")
 
 #: Largest rise of the total energy above E_0 in a conservative scene, as a fraction of the
-#: exchanged energy (the largest kinetic energy of the run). The continuous system conserves
-#: E (kinetic K plus potential P); implicit Euler's step satisfies
+#: exchanged energy (:func:`fem_anim.energy.energy_report`: the largest of |E_0|, the
+#: kinetic energy and the drop of the potential energy over the run). The continuous
+#: system conserves E (kinetic K plus potential P); implicit Euler's step satisfies
 #: M (v_{n+1} - v_n) = -h grad P(x_{n+1}), and for a P convex along the step this gives
 #: K_{n+1} + P_{n+1} + 1/2 ||v_{n+1} - v_n||_M^2 <= K_n + P_n (it only loses energy);
 #: Newmark (the trapezoidal rule) conserves E exactly for a quadratic energy, and a
