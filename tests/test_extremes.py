@@ -111,3 +111,13 @@ def test_p1_locks_near_incompressibility_p2_does_not(table):
 @pytest.mark.parametrize("case", FULL, ids=[c.name for c in FULL])
 def test_extreme_full(case, table):
     _check(case, table, "full")
+
+
+def test_set_override_refused_by_every_case_is_bad_input(capsys):
+    """``--set`` with a key no scene takes is one error line and exit code 2, not a table of
+    cases that did not run."""
+    from fem_anim.bench.extremes import main
+
+    assert main(["--set", "solver.hesian=auto", "-q", "--no-locking"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("fem-anim: error:") and "hesian" in err and err.count("\n") == 1

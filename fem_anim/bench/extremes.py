@@ -570,6 +570,9 @@ def main(argv: list[str]) -> int:
     except FemAnimError as err:
         print_error(str(err))
         return 2
+    if results and all(out.measured == "not run" for _, out in results):
+        print_error(results[0][1].detail)  # refused everywhere: bad input, not a case's limit
+        return 2
     table = format_table(results, locking, args.full)
     if MPI.COMM_WORLD.rank == 0:
         print(table)
