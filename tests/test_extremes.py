@@ -8,7 +8,12 @@ terminal reporter) and is what ``fem-anim bench --extremes [--full]`` prints.
 
 import pytest
 
-from fem_anim.bench.extremes import cases, format_table, locking_rows, run_case
+import copy
+import re
+
+from fem_anim.bench.extremes import (FINISHES, cases, expected_outcome, format_table,
+                                     locking_rows, matches, pin_displacement, pinned_gaps,
+                                     run_case)
 
 FAST = cases(full=False)
 FULL = cases(full=True)
@@ -29,13 +34,58 @@ def table(request):
 def _check(case, table, tier):
     outcome = run_case(case)
     table[tier].append((case, outcome))
-    assert outcome.measured == case.expected, outcome.detail
+    assert matches(case.expected, outcome.measured), outcome.detail
     if outcome.measured == "stops-with-message":
         assert "reduce time.dt" in outcome.detail or "min_dt" in outcome.detail, outcome.detail
+        # it stops because the gap closes: where it stops, less than an element size is left
+        t = float(re.search(r"t = ([0-9.e+-]+) s", outcome.detail).group(1))
+        keys = case.keys  # the gaps at times 0 and t: one "step" of length t
+        gaps = pinned_gaps(keys | {"time": keys["time"] | {"dt": t}}, 1)
+        assert min(g["smallest"] for g in gaps) < keys["mesh"]["element_size"], outcome.detail
     else:
         assert outcome.info["newton_its"] >= case.steps
     if case.name.startswith("thin"):
         assert outcome.info["aspect"] >= 50
+
+
+def _named(full, name):
+    return next(c for c in (FULL if full else FAST) if c.name.startswith(name))
+
+
+@pytest.mark.parametrize("full", [False, True], ids=["2D", "3D"])
+def test_expected_outcomes_follow_from_the_scene(full):
+    """expected_outcome's derivation, from the pins' geometry alone (no FEM run)."""
+    crushed, press = _named(full, "crushed"), _named(full, "press")
+    d = crushed.keys["mesh"]["dim"]
+    # the press closes the 0.2 m gap at 0.2 m/s for 1 s = 10 steps of 0.1 s: exactly zero
+    (gap,) = pinned_gaps(crushed.keys, crushed.steps)
+    assert gap["axis"] == d - 1 and gap["initial"] == pytest.approx(0.2)
+    assert gap["smallest"] == pytest.approx(0.0, abs=1e-15)
+    assert expected_outcome(crushed) == "stops-with-message"
+    shorter = copy.deepcopy(crushed)  # stopped halfway the body keeps 0.1 m: well posed
+    shorter.steps = 5
+    assert pinned_gaps(shorter.keys, 5)[0]["smallest"] == pytest.approx(0.1)
+    assert expected_outcome(shorter) == FINISHES
+    # the press's first step moves the end 4 m/s x 0.1 s = 0.4 m >= the element size
+    (gap,) = pinned_gaps(press.keys, press.steps)
+    assert gap["first_closing"] == pytest.approx(0.4) and gap["smallest"] == pytest.approx(0.6)
+    assert expected_outcome(press) == "recovers-by-substepping"
+    slow = copy.deepcopy(press)  # 0.3 m/s x 0.1 s = 0.03 m < h: the first step can start
+    slow.keys["pin"][1]["velocity"][0] = -0.3
+    assert expected_outcome(slow) == FINISHES
+    # the stretched bar: 2 m/s for 1 s takes the gap from 1 to 3 m (3x length)
+    stretched = _named(full, "stretched")
+    assert pinned_gaps(stretched.keys, stretched.steps)[0]["smallest"] == pytest.approx(1.0)
+    assert pin_displacement(stretched.keys["pin"][1], 5.0)[0] == pytest.approx(2.0)
+    # linear elasticity is not rotation invariant (seed eq. 36); every other case is well
+    # posed and must finish, by converging or by substepping
+    for case in (FULL if full else FAST):
+        if case.name.endswith("linear"):
+            assert case.expected == "fails the physical check"
+        elif case not in (crushed, press):
+            assert case.expected == FINISHES, case.name
+    assert matches(FINISHES, "recovers-by-substepping") and matches(FINISHES, "converges-bounded")
+    assert not matches(FINISHES, "stops-with-message")
 
 
 @pytest.mark.parametrize("case", FAST, ids=[c.name for c in FAST])
@@ -61,3 +111,13 @@ def test_p1_locks_near_incompressibility_p2_does_not(table):
 @pytest.mark.parametrize("case", FULL, ids=[c.name for c in FULL])
 def test_extreme_full(case, table):
     _check(case, table, "full")
+
+
+def test_set_override_refused_by_every_case_is_bad_input(capsys):
+    """``--set`` with a key no scene takes is one error line and exit code 2, not a table of
+    cases that did not run."""
+    from fem_anim.bench.extremes import main
+
+    assert main(["--set", "solver.hesian=auto", "-q", "--no-locking"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("fem-anim: error:") and "hesian" in err and err.count("\n") == 1
