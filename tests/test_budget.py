@@ -164,15 +164,26 @@ def test_bad_budget_keys_exit_2(tmp_path, capsys, solver, message):
     assert err.count("\n") == 1 and "Traceback" not in err
 
 
-def test_budget_covers_auto_restarts(tmp_path):
-    """hessian = "auto" with CG continues a failed solve filtered (a restart): the budget
-    counts the iterations of every restart (the crushed cube of test_solver_menu)."""
+def test_budget_covers_auto_restarts(tmp_path, monkeypatch):
+    """hessian = "auto" with CG meets the crushed cube's indefinite Hessian (test_solver_menu)
+    by truncated CG directions and, should one fail, by continuing the solve filtered (a
+    restart): the budget counts the iterations of every SNES solve of the step. Restarts
+    are forced here (truncation off) so that the path is taken."""
     from test_solver_menu import squash
+
+    from fem_anim.newton_hessian import HessianChoice
+
     solver = 'preset = "cg-icc"\nmax_iterations = 3\non_budget = "accept"'
-    sim = squash(tmp_path, hessian="auto", solver=solver)
-    state, restarts = sim.initial_state(), 0
-    for _ in range(4):
-        state, stats = sim.step(state, 0.05)
-        restarts += sim.minimiser.hessian.restarts
-        assert stats.newton_its == 3 and stats.reason == BUDGET_REASON
-    assert restarts >= 1  # measured: 2 (steps 1 and 3)
+    for truncate in (True, False):
+        if not truncate:
+            monkeypatch.setattr(HessianChoice, "_truncate_cg",
+                                lambda self: setattr(self, "_truncated", False))
+        (tmp_path / str(truncate)).mkdir()
+        sim = squash(tmp_path / str(truncate), hessian="auto", solver=solver)
+        state, indefinite = sim.initial_state(), 0
+        for _ in range(4):
+            state, stats = sim.step(state, 0.05)
+            choice = sim.minimiser.hessian
+            indefinite += choice.restarts if not truncate else choice.truncated
+            assert stats.newton_its == 3 and stats.reason == BUDGET_REASON
+        assert indefinite >= 1  # the indefinite Hessian was met (truncated, or restarted)
