@@ -571,7 +571,12 @@ class EnergyProblem:
         with b.localForm() as b_local:
             b_local.set(0.0)
         fem_petsc.assemble_vector(b, self.residual_form)
-        fem_petsc.apply_lifting(b, [self.jacobian_form], [self.bcs], [x], -1.0)
+        # the lifting reads x at ghost dofs too: those of the state u (set_state updated
+        # them), not x's own ghost entries, which SNES never updates (a line-search trial's
+        # are stale: under MPI the residual then disagreed with g near pinned dofs owned
+        # by another rank)
+        fem_petsc.apply_lifting(b, [self.jacobian_form], [self.bcs],
+                                [compat.petsc_vec(self.unknown)], -1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         if self.ipc is not None:
             self.ipc.add_gradient(b, float(self.weight.value))
