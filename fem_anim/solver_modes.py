@@ -48,7 +48,8 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
     Leaves anything malformed to the validator (an unknown mode, a non-table).
     """
     solver = raw.get("solver")
-    if not isinstance(solver, dict) or solver.get("mode") not in SOLVER_MODES:
+    if not isinstance(solver, dict) or not isinstance(solver.get("mode"), str) or \
+            solver["mode"] not in SOLVER_MODES:
         return
     element = raw.get("element")
     mixed = isinstance(element, dict) and element.get("formulation") == "mixed"
