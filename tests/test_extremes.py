@@ -107,8 +107,17 @@ def test_p1_locks_near_incompressibility_p2_does_not(table):
         assert abs(r["reference"] / r["beam_theory"] - 1) < 0.05
 
 
+#: Known to miss its derived expectation with the default (exact) Hessian: the problem is well
+#: posed but exact Newton stops at time.min_dt (DIVERGED_LINE_SEARCH); solver.hessian = "auto"
+#: finishes it (README "Stability at the extremes"; issue 20: auto is not the default yet).
+EXACT_MISSES = ("nu = 0.4999, P2",)
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("case", FULL, ids=[c.name for c in FULL])
+@pytest.mark.parametrize("case", [pytest.param(
+    c, marks=pytest.mark.xfail(strict=True, reason="exact Newton stops at time.min_dt; auto "
+                               "finishes (issue 20)")) if c.name in EXACT_MISSES else c
+    for c in FULL], ids=[c.name for c in FULL])
 def test_extreme_full(case, table):
     _check(case, table, "full")
 
