@@ -233,6 +233,19 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_extremes.py::test_expected_outcomes_follow_from_the_scene[2D]",),
              "a first-step stroke compared the wrong way: every gentle pin motion is "
              "expected to need substeps"),
+    # -- budget, preview, parallel residual ------------------------------------------------------
+    Mutation("budget-accepts-worse", "fem_anim/solver.py",
+             "better, shown = g < g0,", "better, shown = True,",
+             ("tests/test_budget.py::test_accept_keeps_only_an_iterate_that_lowered_g",),
+             "on_budget = accept keeps an iterate that raised the step objective"),
+    Mutation("preview-overrides-explicit", "fem_anim/solver_modes.py",
+             "solver.setdefault(key, value)", "solver[key] = value",
+             ("tests/test_preview.py::test_explicit_keys_win_over_the_preview",),
+             "the preview overwrites the solver keys the scene gave"),
+    Mutation("lifting-stale-ghosts", "fem_anim/problem.py",
+             "[compat.petsc_vec(self.unknown)], -1.0)", "[x], -1.0)",
+             ("tests/test_mpi_gradient.py::test_residual_is_the_objectives_gradient_under_mpi",),
+             "the lifting reads SNES's iterate at ghost dofs (stale under MPI)"),
 ]
 
 

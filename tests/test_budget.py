@@ -187,3 +187,15 @@ def test_budget_covers_auto_restarts(tmp_path, monkeypatch):
             indefinite += choice.restarts if not truncate else choice.truncated
             assert stats.newton_its == 3 and stats.reason == BUDGET_REASON
         assert indefinite >= 1  # the indefinite Hessian was met (truncated, or restarted)
+
+
+def test_accept_keeps_only_an_iterate_that_lowered_g(tmp_path):
+    """on_budget = "accept" keeps x only when g(x) < g(x_0): one clear error otherwise."""
+    sim = Simulation(falling_bar(tmp_path, max_iterations=1, on_budget="accept"),
+                     MPI.COMM_WORLD)
+    x = sim.problem.x_work
+    sim.problem.load_guess(sim.initial_state().u, x)
+    g = sim.minimiser.objective(sim.minimiser.snes, x)
+    assert sim.minimiser._accept_at_budget(x, g + 1.0, 0.0, "step 1") == BUDGET_REASON
+    with pytest.raises(ConvergenceError, match="did not improve on its initial guess"):
+        sim.minimiser._accept_at_budget(x, g - 1.0, 0.0, "step 1")
