@@ -8,21 +8,21 @@ fills nothing: Newton to the residual test of the preset (seed section 3.2, eq. 
 step objective (``max_iterations = 1``, ``on_budget = "accept"``: the linearly implicit step
 of Baraff and Witkin, seed eq. 10 taken once from the predictor), solved by conjugate
 gradients with incomplete Cholesky (``cg-icc``) to a relative residual of 1e-4 (``[solver.petsc]
-ksp_rtol``: one Newton step is ~1e-3 from the converged step, so solving its linear system to
-the preset's 1e-10 buys nothing: on the 11 520-tetrahedron beam 1e-4 takes 25 CG iterations
-per step instead of 58 for the same tip, 1e-3 18 for a tip 13 % further off), with
-``hessian = "auto"``: the exact
-Hessian, filtered only when CG meets negative curvature (a bent 60k-tetrahedron beam's
-Hessian is indefinite from t ~ 0.5 s: with the exact Hessian alone CG fails there and the
-step with it). It was chosen from the speed/accuracy front
-of the trade study (README "A preview faster and better than VBD";
-``python -m fem_anim.bench.preview``): on the peers' beam of 11 520 tetrahedra it runs
-about 2.5x faster than the fastest exact configuration, with the tip within ~1e-3 of the
-exact trajectory, where pbatoolkit's VBD at 20 sweeps is both slower and tens of percent
-off. Every step it accepts without meeting the residual test is marked in stats.csv
-(reason 7, ``residual_ratio``), so the inexactness is visible. A mixed (u, p) scene keeps
-its saddle-point preset and exact Hessian; a scene whose regions use several material models,
-or that names another ``method`` or a ``hessian_update``, keeps the exact Hessian (``auto``
+ksp_rtol``), with ``hessian = "auto"``. One Newton step is ~1e-3 from the converged step, so
+solving its linear system to the preset's 1e-10 buys nothing: on the 11 520-tetrahedron beam
+1e-4 takes 25 CG iterations per step instead of 58 for the same tip (1e-3: 18, with a tip 13 %
+further off). ``auto`` keeps the exact Hessian and filters it only where CG meets negative
+curvature: a bent 60k-tetrahedron beam's Hessian is indefinite from t ~ 0.5 s, where CG on the
+exact Hessian alone fails and the step with it.
+
+It was chosen from the speed/accuracy front of the trade study (README "A preview faster and
+better than VBD"; ``python -m fem_anim.bench.preview``): on the peers' beam of 11 520
+tetrahedra it runs about 2.5x faster than the fastest exact configuration, with the tip within
+~1e-3 of the exact trajectory, where pbatoolkit's VBD at 20 sweeps is both slower and tens of
+percent off. Every step it accepts without meeting the residual test is marked in stats.csv
+(reason 7, ``residual_ratio``), so the inexactness is visible. A mixed (u, p) scene keeps its
+saddle-point preset and exact Hessian; a scene whose regions use several material models, or
+that names another ``method`` or a ``hessian_update``, keeps the exact Hessian (``auto``
 filters one model's tangent, and a kept Hessian is never filtered).
 """
 
