@@ -21,13 +21,12 @@ contact is set up.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
 from .errors import MeshError, SceneError
-from .mesh import SimplexMesh, _build_gmsh, build_mesh, mesh_from_arrays, read_mesh_file
+from .mesh import SimplexMesh, build_mesh, mesh_arrays, mesh_from_arrays
 
 __all__ = ["body_regions", "body_pins", "build_scene_mesh", "rotation_matrix"]
 
@@ -50,12 +49,7 @@ def _body_arrays(scene, body: dict) -> tuple[np.ndarray, np.ndarray]:
     """Placed vertices and cells of one body's mesh (rank 0)."""
     cfg = body["mesh"]
     d = cfg["dim"]
-    if cfg["shape"] == "file":
-        path = Path(cfg["file"])
-        path = path if path.is_absolute() else scene.base_dir / path
-        points, cells, _, _ = read_mesh_file(path, d, cfg["element_size"])
-    else:
-        points, cells, _, _ = _build_gmsh(cfg)
+    points, cells, _, _, _ = mesh_arrays(cfg, scene.base_dir)
     offset = np.zeros(d) if body["offset"] is None else np.asarray(body["offset"], float)
     return points @ rotation_matrix(body["rotation"], d).T + offset, cells
 

@@ -37,6 +37,7 @@ __all__ = [
     "cell_volumes",
     "check_cells",
     "check_surface",
+    "mesh_arrays",
     "mesh_from_arrays",
     "read_mesh_file",
 ]
@@ -499,6 +500,26 @@ def _cell_dim(cell_type: str) -> int:
     return 0
 
 
+def mesh_arrays(cfg: dict, base_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict,
+                                                     str]:
+    """Vertices, simplices, cell markers, their names and a description of one ``[mesh]``
+    table (rank 0): a mesh file (relative to ``base_dir``), a structured box
+    (``divisions``: :func:`fem_anim.meshes.structured.structured_box`) or a gmsh builder.
+
+    Raises:
+        MeshError: if the mesh cannot be read or made.
+    """
+    if cfg["shape"] == "file":
+        path = Path(cfg["file"])
+        path = path if path.is_absolute() else base_dir / path
+        return (*read_mesh_file(path, cfg["dim"], cfg["element_size"]), f"mesh file {path}")
+    if cfg["shape"] == "box" and cfg.get("divisions") is not None:
+        points, cells = structured_box(cfg["size"], cfg["divisions"], cfg["origin"])
+        return (points, cells, np.ones(len(cells), np.int32), {"body": 1},
+                f"mesh (structured box {cfg['divisions']})")
+    return (*_build_gmsh(cfg), f"mesh ({cfg['shape']})")
+
+
 def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
     """Build the scene's mesh on rank 0 and distribute it (collective).
 
@@ -515,17 +536,7 @@ def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
     error = None
     if comm.rank == 0:
         try:
-            if cfg["shape"] == "file":
-                path = Path(cfg["file"])
-                path = path if path.is_absolute() else scene.base_dir / path
-                source = f"mesh file {path}"
-                points, cells, markers, names = read_mesh_file(path, d, cfg["element_size"])
-            elif cfg["shape"] == "box" and cfg.get("divisions") is not None:
-                points, cells = structured_box(cfg["size"], cfg["divisions"], cfg["origin"])
-                markers, names = np.ones(len(cells), np.int32), {"body": 1}
-                source = f"mesh (structured box {cfg['divisions']})"
-            else:
-                points, cells, markers, names = _build_gmsh(cfg)
+            points, cells, markers, names, source = mesh_arrays(cfg, scene.base_dir)
         except MeshError as err:
             error = str(err)
     error = comm.bcast(error, root=0)

@@ -453,3 +453,19 @@ def test_structured_scene_gives_the_peers_beam(tmp_path):
     mesh = build(scene)
     assert mesh.mesh.topology.index_map(3).size_global == 11520
     assert abs(volumes(mesh.points, mesh.cells).sum() - 0.04) <= 1e-15
+
+
+def test_a_body_of_several_takes_its_structured_divisions_too(tmp_path):
+    """[[body]] meshes go through the same builder choice: divisions make the structured box."""
+    from fem_anim.body import build_scene_mesh
+
+    box = 'mesh = { shape = "box", size = [0.1, 0.1, 0.1], %s }\n'
+    text = ('name = "two"\n[contact]\ndhat = 0.005\n'
+            '[[body]]\nname = "gmsh"\noffset = [-0.11, 0, 0]\n' + box % "element_size = 0.05" +
+            '[[body]]\nname = "grid"\noffset = [0.03, 0, 0]\n' + box % "divisions = [2, 3, 4]")
+    path = tmp_path / "two.toml"
+    path.write_text(text)
+    domain = build_scene_mesh(MPI.COMM_SELF, load_scene(path))
+    grid = domain.points[domain.cells].mean(axis=1)[:, 0] > 0.0
+    assert grid.sum() == 6 * 2 * 3 * 4
+    assert abs(volumes(domain.points, domain.cells)[grid].sum() - 1e-3) <= 1e-17
