@@ -228,7 +228,7 @@ class EnergyProblem:
             unknown.function_space)
         du_V, dv_V = (ufl.TrialFunction(V), ufl.TestFunction(V)) if self.mixed else (du, dv)
         ufl_forms = {}
-        if "damping" in scene.data:
+        if scene.damped:
             convex += self._dissipation(self.u, self.u_anchor, self.damping_coefficient)
             zero = ufl.as_vector([0.0] * d)
             ufl_forms["damping_force"] = ufl.derivative(

@@ -406,6 +406,12 @@ class Scene:
     def dim(self) -> int:
         return self.data["mesh"]["dim"]
 
+    @property
+    def damped(self) -> bool:
+        """A ``[damping]`` section with a positive coefficient (alpha = beta = 0: no term)."""
+        damping = self.data.get("damping")
+        return damping is not None and (damping["alpha"] > 0 or damping["beta"] > 0)
+
 
 def default_scene_text() -> str:
     """The TOML text of the embedded default scene (the hanging beam)."""

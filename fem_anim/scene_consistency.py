@@ -64,7 +64,8 @@ def _check_formulation(data: dict[str, Any]) -> None:
         raise SceneError(f"material.poisson_ratio must be in (0, 0.5] {where}, got "
                          f"{mat['poisson_ratio']}")
     refused = {"region": bool(data.get("region")), "obstacle": bool(data["obstacle"]),
-               "damping": "damping" in data}
+               "damping": bool(data.get("damping")) and any(
+                   data["damping"][k] > 0 for k in ("alpha", "beta"))}
     for key, present in refused.items():
         if present:
             raise SceneError(f"[{key}] is not supported {where}")

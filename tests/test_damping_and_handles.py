@@ -93,6 +93,18 @@ def test_no_damping_section_builds_no_damping_term(tmp_path):
     assert "damping_anchor" in {c.name for c in sim.problem.ufl_objective.coefficients()}
 
 
+def test_zero_damping_section_is_the_undamped_scene(tmp_path):
+    """``[damping]`` with alpha = beta = 0 (a sweep's zero) builds no term and runs as if the
+    section were absent (it raised a TypeError from the empty form before)."""
+    sim, state = bar(tmp_path, alpha=0.0, beta=0.0)
+    assert not sim.scene.damped and sim.problem.damping_force_form is None
+    plain, plain_state = bar(tmp_path)
+    for _ in range(3):
+        state, _ = sim.step(state, 0.005)
+        plain_state, _ = plain.step(plain_state, 0.005)
+    assert np.array_equal(state.u, plain_state.u)
+
+
 HANDLE = """
 [[pin]]
 name = "handle"
