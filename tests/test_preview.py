@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import scenes
 from mpi4py import MPI
+from conftest import mpirun_command
 from test_cli import read_stats
 
 from fem_anim.bench.preview import main as preview_main
@@ -118,6 +119,14 @@ def test_preview_bench_reduced(tmp_path, capsys):
     reference = next(line for line in text.splitlines() if "(reference)" in line)
     assert "| 144 |" in reference and reference.count("| 0 |") >= 1  # 6 tets per cube
     assert "preview" in text
+    # where the exact step's time goes: the serial row, its floor below the step's time
+    split = [line.split("|")[1:-1] for line in text.split("### Where")[1].splitlines()
+             if line.startswith("| fem_anim exact")]
+    assert split and all(float(row[-2]) < float(row[-4]) for row in split)  # floor, ms/step
+    if mpirun_command(2) is not None:  # the same configuration on 2 ranks: the serial tip
+        row = next(line for line in text.splitlines()
+                   if "hessian auto, mpirun -n 2" in line and "not run" not in line)
+        assert float(row.split("|")[8]) < 1e-3, row  # trajectory dev.: both converged steps
 
 
 def test_preview_bench_bad_arguments(tmp_path, capsys):

@@ -84,6 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--peers", action="store_true", help="numpy reference and pbatoolkit")
     p.add_argument("--worker", metavar="JSON", help=argparse.SUPPRESS)
     p.add_argument("--preset", help=argparse.SUPPRESS)
+    p.add_argument("--tip", action="store_true", help=argparse.SUPPRESS)
     return p
 
 
@@ -114,8 +115,9 @@ def mpirun_prefix(n: int) -> list[str]:
 
 def run_config(scene_path: str | None, overrides: list[str], preset: str, steps: int,
                petsc: list[str] = (), ranks: int = 1, env: dict | None = None,
-               timeout: float = 1800.0) -> dict:
-    """Measure one configuration in a fresh process; returns the worker's JSON result.
+               timeout: float = 1800.0, tip: bool = False) -> dict:
+    """Measure one configuration in a fresh process; returns the worker's JSON result
+    (with ``tip``, also the tip's path: :func:`fem_anim.bench.worker.measure`).
 
     Raises:
         FemAnimError: if the worker fails (its last stderr line is quoted).
@@ -127,6 +129,7 @@ def run_config(scene_path: str | None, overrides: list[str], preset: str, steps:
         for o in overrides:
             cmd += ["--set", o]
         cmd += ["--worker", str(out), "--preset", preset, "--steps", str(steps), *petsc]
+        cmd += ["--tip"] if tip else []
         if ranks > 1:
             cmd = mpirun_prefix(ranks) + cmd
         environ = {k: v for k, v in os.environ.items()
@@ -219,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
             from .worker import run_worker
 
             scene = load_scene(args.scene, args.overrides)
-            run_worker(scene, args.preset, args.steps, solver_options, args.worker)
+            run_worker(scene, args.preset, args.steps, solver_options, args.worker, args.tip)
             return 0
         from mpi4py import MPI
 

@@ -35,7 +35,8 @@ import numpy as np
 
 from ..errors import ConvergenceError, FemAnimError
 
-__all__ = ["CONFIGS", "SIZES", "VBD_SWEEPS", "compare", "main", "preview_table", "tip_errors"]
+__all__ = ["CONFIGS", "FLOOR", "SIZES", "VBD_SWEEPS", "compare", "main", "preview_table",
+           "split_rows", "split_text", "tip_errors"]
 
 SIZES = ((30, 8, 8), (70, 12, 12))
 VBD_SWEEPS = (20, 100)
@@ -43,17 +44,21 @@ VBD_SWEEPS = (20, 100)
 BEAM = ['material.model="stable_neohookean"', 'time.integrator="implicit_euler"',
         "time.dt=0.016666666666666666", "output.render=false"]
 REFERENCE = "fem_anim exact, cholesky (reference)"
-#: fem_anim's configurations after the reference: (label, preset or None, scene keys).
+#: fem_anim's configurations after the reference: (label, preset or None, scene keys, ranks);
+#: a row with ranks > 1 runs in its own process under ``mpirun -n ranks``.
+EXACT = ("cg-icc", ['solver.forcing="adaptive"', 'solver.hessian="auto"'])
 CONFIGS = (
-    ("fem_anim exact, cg-icc, forcing adaptive, hessian auto", "cg-icc",
-     ['solver.forcing="adaptive"', 'solver.hessian="auto"']),
-    ("fem_anim exact, cg-icc, forcing adaptive", "cg-icc", ['solver.forcing="adaptive"']),
+    ("fem_anim exact, cg-icc, forcing adaptive, hessian auto", *EXACT, 1),
+    ("fem_anim exact, cg-icc, forcing adaptive, hessian auto, mpirun -n 2", *EXACT, 2),
+    ("fem_anim exact, cg-icc, forcing adaptive", "cg-icc", ['solver.forcing="adaptive"'], 1),
     ("fem_anim budget 2, cg-icc, forcing adaptive, hessian auto", "cg-icc",
      ["solver.max_iterations=2", 'solver.on_budget="accept"', 'solver.forcing="adaptive"',
-      'solver.hessian="auto"']),
-    ('fem_anim preview (solver.mode = "preview")', None, ['solver.mode="preview"']),
+      'solver.hessian="auto"'], 1),
+    ('fem_anim preview (solver.mode = "preview")', None, ['solver.mode="preview"'], 1),
+    ('fem_anim preview (solver.mode = "preview"), mpirun -n 2', "cg-icc",
+     ['solver.mode="preview"'], 2),
     ("fem_anim preview, CG to 1e-2", None,
-     ['solver.mode="preview"', "solver.petsc.ksp_rtol=1e-2"]),
+     ['solver.mode="preview"', "solver.petsc.ksp_rtol=1e-2"], 1),
 )
 TIMES = (0.5, 1.0)
 
@@ -73,9 +78,9 @@ def tip_errors(tip: np.ndarray, reference: np.ndarray, dt: float) -> list[float]
 
 
 def compare(divisions, steps: int, python: Path | None, log=print, configs=CONFIGS,
-            sweeps=VBD_SWEEPS) -> list[list]:
+            sweeps=VBD_SWEEPS, splits: dict | None = None) -> list[list]:
     """Rows [solver, tets, s/step, steps/s, Newton its/step, tip errors..., vs VBD] for one
-    mesh."""
+    mesh; ``splits`` (if given) gets each fem_anim row's mean phase split by (tets, label)."""
     from mpi4py import MPI
 
     from ..mesh import build_mesh
@@ -88,18 +93,27 @@ def compare(divisions, steps: int, python: Path | None, log=print, configs=CONFI
     domain = build_mesh(MPI.COMM_SELF, scene)
     runs, failed = {}, {}
     tets = None
-    for label, preset, extra in (("", "cholesky", []), *configs):
+    for label, preset, extra, ranks in (("", "cholesky", [], 1), *configs):
         try:
-            times, tip, r = _fem_anim(load_scene(None, [*keys, *extra]), preset, steps)
+            if ranks > 1:
+                times, tip, r = _fem_anim_mpi([*keys, *extra], preset, steps, ranks)
+            else:
+                times, tip, r = _fem_anim(load_scene(None, [*keys, *extra]), preset, steps)
         except ConvergenceError as err:
             if not label:
                 raise
-            failed[label] = str(err).split(":")[0]  # "step N (t = ...)"
-            log(f"  {label}: stopped at {failed[label]}")
+            failed[label] = "stopped at " + str(err).split(":")[0]  # "step N (t = ...)"
+            log(f"  {label}: {failed[label]}")
+            continue
+        except FemAnimError as err:  # mpirun missing or its worker failed to start
+            failed[label] = f"not run ({err})"
+            log(f"  {label}: {failed[label]}")
             continue
         its = float(np.mean([s["newton_its"] for s in r["steps"]]))
         runs[label or REFERENCE] = (times, tip, its)
         tets = r["tets"]
+        if splits is not None:
+            splits[(tets, label or REFERENCE)] = r["mean"]
         log(f"  {tets} tets {label or REFERENCE}: {np.mean(times[1:]):.4f} s/step")
     if python is not None:
         for n in sweeps:
@@ -116,8 +130,44 @@ def compare(divisions, steps: int, python: Path | None, log=print, configs=CONFI
         rows.append([name, tets, per_step, 1.0 / per_step, its,
                      *tip_errors(np.asarray(tip), reference, dt), *ratios])
     for name, where in failed.items():  # a run that failed: where, no figures
-        rows.append([f"{name}: stopped at {where}", tets, *["-"] * (len(rows[0]) - 2)])
+        rows.append([f"{name}: {where}", tets, *["-"] * (len(rows[0]) - 2)])
     return rows
+
+
+#: The phases of a step (:data:`fem_anim.bench.worker.PHASE_COLUMNS`) that make its floor:
+#: one Hessian assembly and one preconditioned solve per Newton iteration.
+FLOOR = ("jacobian", "factor_symbolic", "factor_numeric", "solve")
+
+
+def split_rows(splits: dict, labels=(CONFIGS[0][0], CONFIGS[1][0])) -> list[list]:
+    """Where a step's time goes: [solver, tets, ranks, ms per phase..., ms/step, floor, x floor].
+
+    The floor is the step's own Hessian assemblies and preconditioned solves (:data:`FLOOR`);
+    the rest is what Newton with a line search adds (residuals, objectives, energies, Python).
+    """
+    from .worker import PHASE_COLUMNS
+
+    rows = []
+    for (tets, label), mean in splits.items():
+        if label not in labels:
+            continue
+        floor = sum(mean[k] for k in FLOOR)
+        rows.append([label, tets, *[1e3 * mean[k] for k in PHASE_COLUMNS],
+                     1e3 * mean["wall"], mean["newton_its"], 1e3 * floor,
+                     mean["wall"] / floor])
+    return rows
+
+
+def _fem_anim_mpi(overrides: list[str], preset: str, steps: int, ranks: int):
+    """One configuration under ``mpirun -n ranks`` (its own process): step times, tip, result.
+
+    Raises:
+        FemAnimError: if mpirun is missing or the worker failed (its last line is quoted).
+    """
+    from .perf import run_config
+
+    r = run_config(None, overrides, preset, steps, ranks=ranks, tip=True)
+    return np.array([s["wall"] for s in r["steps"]]), np.array(r["tip"]), r
 
 
 def preview_table(out: Path, sizes=SIZES, steps: int = 60, log=print,
@@ -128,9 +178,9 @@ def preview_table(out: Path, sizes=SIZES, steps: int = 60, log=print,
 
     python = peer_python(install)
     load = _load()
-    rows = []
+    rows, splits = [], {}
     for divisions in sizes:
-        rows += compare(divisions, steps, python, log, sweeps=sweeps)
+        rows += compare(divisions, steps, python, log, sweeps=sweeps, splits=splits)
     shown = [n for n in sweeps] if python is not None else []
     headers = ["solver", "tets", "s/step", "steps/s", "its/step",
                *[f"tip dev. t = {t:g} s" for t in TIMES], "trajectory dev.",
@@ -148,9 +198,24 @@ def preview_table(out: Path, sizes=SIZES, steps: int = 60, log=print,
             "over the row's, measured in the same run. pbatoolkit's stable neo-Hookean "
             "omits the log term of fem_anim's and is given lambda + mu (same rest response), "
             "so a converged pbatoolkit step would still differ slightly from the reference."
-            "\n\n" + md_table(headers, rows) + note)
+            "\n\n" + md_table(headers, rows) + note + "\n\n" + split_text(splits))
     (out / "preview.md").write_text(text + "\n", encoding="utf-8")
     return text
+
+
+def split_text(splits: dict) -> str:
+    """The phase table of the exact rows (serial and under mpirun), as Markdown."""
+    from .report import md_table
+    from .worker import PHASE_COLUMNS
+
+    headers = ["solver", "tets", *[f"{k} ms" for k in PHASE_COLUMNS], "ms/step", "its/step",
+               "floor ms", "x floor"]
+    return ("### Where the exact step's time goes\n\nMean milliseconds per step (steps "
+            "2..N) by phase, from PETSc's log events (:mod:`fem_anim.bench.timing`; under "
+            "mpirun rank 0's split, the slowest rank's wall time). The floor is one Hessian "
+            "assembly and one preconditioned solve per Newton iteration (jacobian + "
+            "factorisations + solve of the same run).\n\n"
+            + md_table(headers, split_rows(splits)))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -94,9 +94,9 @@ def _tip(sim, state) -> np.ndarray:
 
 
 def run_worker(scene, preset: str | None, steps: int, cli_options: dict[str, str],
-               out: str) -> None:
+               out: str, tip: bool = False) -> None:
     """Measure one configuration and write its result as JSON (rank 0)."""
-    result = measure(scene, preset, steps, cli_options)
+    result = measure(scene, preset, steps, cli_options, tip=tip)
     if MPI.COMM_WORLD.rank == 0:
         with open(out, "w", encoding="utf-8") as f:
             json.dump(result, f)
