@@ -53,9 +53,13 @@ def test_default_scene_outputs(default_run):
             assert math.isfinite(row[key]), (row["step"], key)
         assert row["total_energy"] == pytest.approx(
             row["kinetic"] + row["elastic"] + row["gravity"], rel=1e-12, abs=1e-12)
-    # energy is exchanged, not created: Newmark keeps the total small against the swing
+    # energy is exchanged and (Rayleigh damping, beta = 1e-4) slowly taken away, not created:
+    # the total stays at most its first value and loses a few % of the swing in 1 s
+    # (measured 4.6 %; without the damping Newmark kept it within 5e-3 of the swing)
     swing = max(abs(r["gravity"]) for r in rows)
-    assert max(abs(r["total_energy"]) for r in rows) < 5e-3 * swing
+    totals = [r["total_energy"] for r in rows]
+    assert max(totals) <= totals[0] + 1e-9 * swing
+    assert 1e-2 * swing < -totals[-1] < 1e-1 * swing
 
 
 def test_default_scene_beam_sags(default_run):

@@ -173,11 +173,11 @@ def test_reduced_hard_bench_table():
     assert "| crushed cube, StVK | auto | yes |" in table
 
 
-def _default_run(frames: int, hessian: str) -> list[dict]:
+def _default_run(frames: int, hessian: str, extra=()) -> list[dict]:
     """The default scene for ``frames`` frames (adaptive stepper): its stats rows."""
     from fem_anim.simulation import AdaptiveStepper
 
-    scene = load_scene(None, [f"time.steps={frames}", f'solver.hessian="{hessian}"'])
+    scene = load_scene(None, [f"time.steps={frames}", f'solver.hessian="{hessian}"', *extra])
     sim = Simulation(scene, MPI.COMM_WORLD)
     h = scene["time"]["dt"]
     stepper = AdaptiveStepper(sim, h, scene["time"])
@@ -189,11 +189,15 @@ def _default_run(frames: int, hessian: str) -> list[dict]:
     return rows
 
 
-def test_default_scene_through_its_first_indefinite_hessians():
-    """The default scene to t = 5.6 s: exact Newton needs its first retries at t = 5.4 s
-    (an indefinite Hessian: the line search fails on a non-descent direction); auto filters
-    those iterations (MUMPS's inertia shows them) and takes every step at the full dt."""
-    rows = _default_run(336, "auto")
+#: The default scene without its Rayleigh damping: Newmark's energy is not bounded there.
+UNDAMPED = ["damping.beta=0"]
+
+
+def test_undamped_default_scene_through_its_first_indefinite_hessians():
+    """The undamped default scene to t = 5.6 s: exact Newton needs its first retries at
+    t = 5.4 s (an indefinite Hessian: the line search fails on a non-descent direction); auto
+    filters those iterations (MUMPS's inertia shows them) and takes every step at the full dt."""
+    rows = _default_run(336, "auto", UNDAMPED)
     assert len(rows) == 336 and all(r["retries"] == 0 for r in rows)
     filtered = [r["time"] for r in rows if r["abs_its"] + r["clamp_its"] > 0]
     assert any(5.35 < t < 5.6 for t in filtered), filtered  # the regime was reached
@@ -202,19 +206,38 @@ def test_default_scene_through_its_first_indefinite_hessians():
 
 
 @pytest.mark.slow
-def test_default_scene_20_seconds_without_a_retry():
+def test_undamped_default_scene_20_seconds_without_a_retry():
     """1200 frames (20 s; exact Newton: 19 retries by then): auto, no retry."""
-    rows = _default_run(1200, "auto")
+    rows = _default_run(1200, "auto", UNDAMPED)
     assert len(rows) == 1200 and all(r["retries"] == 0 for r in rows)
 
 
+def _assert_finished_undisturbed(rows: list[dict], frames: int) -> None:
+    """Every frame at the full dt, no retry, each step converged, the total energy never
+    above its value after the first step."""
+    assert len(rows) == frames and all(r["retries"] == 0 for r in rows)
+    assert all(r["snes_reason"] > 0 for r in rows)
+    energy = np.array([r["total_energy"] for r in rows])
+    assert energy.max() <= energy[0] + 1e-9 * np.abs(energy).max(), energy.argmax()
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="from t ~ 21 s Newmark's energy grows without bound "
-                   "(every Hessian mode; dt/2 slows it 8x): the run stops at time.min_dt "
-                   "near t = 26.4 s. A scene matter (damping or a dissipative integrator).")
 def test_default_scene_3000_steps_without_a_retry():
-    rows = _default_run(3000, "auto")
-    assert len(rows) == 3000 and all(r["retries"] == 0 for r in rows)
+    """Issue 20 point 2: the default scene as shipped (Newmark, Rayleigh beta = 1e-4, exact
+    Newton) runs its 50 s: measured 6368 Newton iterations, no retry, E never above E(0)
+    (README "Hessian modes on hard steps")."""
+    _assert_finished_undisturbed(_default_run(3000, "exact"), 3000)
+
+
+def test_default_scene_3000_steps_coarse():
+    """The reduced variant (CI): the same scene at mesh.element_size = 0.1 runs 3000 frames
+    without a retry; undamped, the same mesh needs its first retries by t = 15 s (measured:
+    from t = 12.8 s; 117 retries, then a stop at time.min_dt at t = 44.2 s), so the damping,
+    not the coarse mesh, is what lets it finish."""
+    coarse = ["mesh.element_size=0.1"]
+    _assert_finished_undisturbed(_default_run(3000, "exact", coarse), 3000)
+    undamped = _default_run(900, "exact", [*coarse, *UNDAMPED])
+    assert sum(r["retries"] for r in undamped) > 0
 
 
 @pytest.mark.mpi

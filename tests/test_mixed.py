@@ -181,7 +181,8 @@ def test_mixed_run_under_mpi_equals_serial(tmp_path, preset):
     args = ["run", "-q", "--set", "time.steps=3", "--set", "output.render=false",
             "--set", "mesh.element_size=0.1", "--set", "element.degree=2",
             "--set", 'element.formulation="mixed"', "--set", "material.poisson_ratio=0.5",
-            "--set", 'material.model="stable_neohookean"', "--solver", preset]
+            "--set", 'material.model="stable_neohookean"', "--set", "damping.beta=0",
+            "--solver", preset]
     outs = {}
     for ranks in (1, 2):
         outs[ranks] = tmp_path / f"n{ranks}"
@@ -261,3 +262,15 @@ def test_mixed_rows_of_the_locking_table_do_not_lock():
     for r in rows:
         assert abs(r["ratio"] - 1.0) < 0.02, r
         assert abs(r["reference"] / r["beam_theory"] - 1.0) < 0.05, r
+
+
+def test_the_default_scene_mixed_names_its_damping():
+    """The default scene's Rayleigh damping (beta K_0 needs lambda, infinite at nu = 0.5) is
+    refused with the way out; with beta = 0 the same scene loads."""
+    from fem_anim.errors import SceneError
+    from fem_anim.scene import load_scene
+
+    mixed = ["element.degree=2", 'element.formulation="mixed"']
+    with pytest.raises(SceneError, match=r"set damping.alpha = damping.beta = 0"):
+        load_scene(None, mixed)
+    assert not load_scene(None, [*mixed, "damping.beta=0"]).damped
