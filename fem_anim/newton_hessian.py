@@ -14,9 +14,11 @@ trust-region ratio) are in :mod:`fem_anim.hessian`; this module is the state a
   trust-region filter's choice; with CG (Krylov presets) the iteration is truncated Newton-CG
   (Steihaug 1983; Nocedal & Wright, Algorithm 7.1): CG stopped by negative curvature
   (``DIVERGED_INDEFINITE_MAT``) leaves its last iterate, a descent direction, and SNES takes
-  it (``SNESSetMaxLinearSolveFailures``); only when that direction fails too (zero after a
-  first negative curvature, or the line search fails) does :meth:`HessianChoice.restart`
-  continue the step filtered from its last iterate.
+  it (``SNESSetMaxLinearSolveFailures``); once a step has shown CG indefiniteness, CG is
+  preconditioned by the abs-filtered Hessian (positive definite) for the rest of the step;
+  only when a truncated direction fails too (zero after a first negative curvature, or the
+  line search fails) does :meth:`HessianChoice.restart` continue the step filtered from its
+  last iterate.
 
 Each step's iterations are counted per kind of Hessian (:data:`HESSIAN_KINDS`).
 """
@@ -73,6 +75,9 @@ class HessianChoice:
         self._last_iterate = None
         self._inertia = True  # whether the factorisation reports its inertia (auto)
         self._truncated = None  # auto: whether CG's truncated iterates are taken (first use)
+        self._indefinite_seen = False  # auto with CG: CG met indefiniteness in this step
+        self._pc_matrix = None  # auto with CG: the abs-filtered Hessian CG is preconditioned by
+        self.filtered_preconditioners = 0  # iterations preconditioned by it (the whole run)
 
     def start_step(self) -> None:
         """Forget the previous step: counts, model, auto's state."""
@@ -80,6 +85,7 @@ class HessianChoice:
         self.drop_model()
         self._filtered = self._no_exact = False
         self.restarts = self.truncated = 0
+        self._indefinite_seen = False
 
     def solved(self) -> None:
         """After each SNES solve: count the truncated CG directions it took (``auto``)."""
@@ -221,7 +227,45 @@ class HessianChoice:
             how = trust_region_choice(rho)
             problem.set_hessian_filter(how)
             problem.jacobian(snes, x, A, P)
+        if self._truncated:
+            self._precondition(snes, x, A, filtered=how is None and self._cg_saw_indefinite(snes))
         self.its[how or "exact"] += 1
+
+    def _cg_saw_indefinite(self, snes) -> bool:
+        """Whether CG met an indefinite matrix or preconditioner earlier in this step."""
+        if snes.getIterationNumber() > 0 or self.restarts > 0:  # else: the last step's solve
+            R = PETSc.KSP.ConvergedReason
+            if snes.getKSP().getConvergedReason() in (R.DIVERGED_INDEFINITE_MAT,
+                                                      R.DIVERGED_INDEFINITE_PC):
+                self._indefinite_seen = True
+        return self._indefinite_seen
+
+    def _precondition(self, snes, x: PETSc.Vec, A: PETSc.Mat, filtered: bool) -> None:
+        """``auto`` with CG: precondition by A itself or, once this step has shown CG an
+        indefinite matrix or preconditioner, by the abs-filtered Hessian, while CG still
+        runs on the exact Hessian A.
+
+        Truncated Newton-CG needs a symmetric positive definite preconditioner (Nocedal &
+        Wright, Algorithm 7.1; Steihaug 1983): ICC(0) of an indefinite Hessian is none, and
+        CG then stops after 2-3 iterations at ``DIVERGED_INDEFINITE_PC`` with a poor
+        direction. The abs-filtered Hessian M + w K_|.| is positive definite, so CG stops
+        only at true negative curvature of A, and runs to convergence (a Newton step) where
+        A is positive definite. Measured on the undamped ~55k-tetrahedron beam with
+        ``cg-icc``: 420 -> 368 Newton iterations over 60 frames, no retry, and every step
+        converged (step 55 was kept unconverged before). Costs one more assembly in those
+        iterations only (counted with the exact ones: the Newton matrix is exact).
+        """
+        J, current, (callback, args, kargs) = snes.getJacobian()
+        if filtered:
+            if self._pc_matrix is None:
+                self._pc_matrix = A.duplicate(copy=False)
+            self.problem.set_hessian_filter("abs")
+            self.problem.jacobian(snes, x, self._pc_matrix, self._pc_matrix)
+            self.problem.set_hessian_filter(None)
+            self.filtered_preconditioners += 1
+        wanted = self._pc_matrix if filtered else A
+        if current.handle != wanted.handle:  # SNES passes (J, P) to the KSP after this call
+            snes.setJacobian(callback, J, wanted, *(args or ()), **(kargs or {}))
 
     def _truncate_cg(self) -> None:
         """``auto`` with CG: Newton takes CG's iterate when CG meets negative curvature.
@@ -308,6 +352,8 @@ class HessianChoice:
         return not indefinite
 
     def destroy(self) -> None:
+        if self._pc_matrix is not None:
+            self._pc_matrix.destroy()
         if self._last_iterate is not None:
             self._last_iterate.destroy()
         self.drop_model()

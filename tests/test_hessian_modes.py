@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from conftest import clean_environment, fem_anim_command, mpirun_command
 from mpi4py import MPI
+from petsc4py import PETSc
 from test_cli import read_stats
 from test_solver_menu import run_steps, squash
 
@@ -90,6 +91,38 @@ def test_auto_with_cg_takes_truncated_newton_directions(tmp_path):
     assert truncated[0] >= 1, truncated
     press = state.u.reshape(-1, 3)[sim.problem.moving_pins[0].dofs, 2]
     assert press == pytest.approx(-0.17)
+
+
+def test_auto_with_cg_preconditions_by_a_positive_definite_matrix(tmp_path):
+    """After CG has met indefiniteness in a step, auto preconditions CG by the abs-filtered
+    Hessian (not by ICC(0) of the indefinite one) while CG still runs on the exact Hessian:
+    the two operators differ, the preconditioning matrix is positive definite (a CG probe
+    meets no negative curvature), and the next step starts from A alone again."""
+    sim = squash(tmp_path, hessian="auto", element_size=0.1, solver='preset = "cg-icc"')
+    choice, ksp = sim.minimiser.hessian, sim.minimiser.snes.getKSP()
+    state, stats = sim.step(sim.initial_state(), 0.05)
+    assert stats.reason > 0 and choice.filtered_preconditioners >= 1
+    A, P = ksp.getOperators()
+    assert P.handle != A.handle and P.handle == choice._pc_matrix.handle
+    probe = PETSc.KSP().create(P.getComm())
+    probe.setOperators(P, P)
+    probe.setType("cg")
+    probe.getPC().setType("none")
+    probe.setTolerances(rtol=1e-10, max_it=5000)
+    b, z = P.createVecs()
+    b.setRandom()
+    probe.solve(b, z)
+    assert probe.getConvergedReason() > 0  # no DIVERGED_INDEFINITE_MAT on the SPD matrix
+    assert not P.equal(A)  # filtered where the tangent is indefinite
+    assert _kinds(stats) == {"exact": stats.newton_its}  # the Newton matrix stays exact
+    plain = []  # steps that met no indefiniteness (measured: steps 3 and 4) use A alone
+    for _ in range(3):
+        before = choice.filtered_preconditioners
+        state, stats = sim.step(state, 0.05)
+        assert stats.reason > 0
+        if choice.filtered_preconditioners == before:
+            plain.append(ksp.getOperators()[1].handle == A.handle)
+    assert plain and all(plain)
 
 
 @pytest.mark.parametrize("hessian", ["abs", "trust_region_filter"])
