@@ -68,9 +68,9 @@ def _check_formulation(data: dict[str, Any]) -> None:
                    data["damping"][k] > 0 for k in ("alpha", "beta"))}
     for key, present in refused.items():
         if present:
-            how = {"damping": " (its stiffness-proportional term needs lambda, infinite at "
-                   "nu = 0.5): set damping.alpha = damping.beta = 0 (the default scene has "
-                   "beta = 1e-4)"}.get(key, "")
+            how = {"damping": " (not built for the u-p saddle point; beta K_0 would need "
+                   "lambda, infinite at nu = 0.5): set damping.alpha = damping.beta = 0 (the "
+                   "default scene has beta = 1e-4)"}.get(key, "")
             raise SceneError(f"[{key}] is not supported {where}{how}")
     if data["time"]["integrator"] == "symplectic_euler":
         raise SceneError(f"time.integrator = \"symplectic_euler\" is refused {where}: the "
