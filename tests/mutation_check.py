@@ -246,6 +246,15 @@ MUTATIONS: list[Mutation] = [
              "[compat.petsc_vec(self.unknown)], -1.0)", "[x], -1.0)",
              ("tests/test_mpi_gradient.py::test_residual_is_the_objectives_gradient_under_mpi",),
              "the lifting reads SNES's iterate at ghost dofs (stale under MPI)"),
+    Mutation("truncated-cg-indefinite-pc", "fem_anim/newton_hessian.py",
+             "wanted = self._pc_matrix if filtered else A", "wanted = A",
+             ("tests/test_hessian_modes.py::"
+              "test_auto_with_cg_preconditions_by_a_positive_definite_matrix",),
+             "auto with CG keeps ICC(0) of the indefinite Hessian as its preconditioner"),
+    Mutation("damping-beta-ignored", "fem_anim/scene.py",
+             'and (damping["alpha"] > 0 or damping["beta"] > 0)', 'and damping["alpha"] > 0',
+             ("tests/test_cli.py::test_default_scene_outputs",),
+             "stiffness-proportional damping alone builds no term (the default scene undamped)"),
 ]
 
 
