@@ -14,9 +14,10 @@ trust-region ratio) are in :mod:`fem_anim.hessian`; this module is the state a
   trust-region filter's choice; with CG (Krylov presets) the iteration is truncated Newton-CG
   (Steihaug 1983; Nocedal & Wright, Algorithm 7.1): CG stopped by negative curvature
   (``DIVERGED_INDEFINITE_MAT``) leaves its last iterate, a descent direction, and SNES takes
-  it (``SNESSetMaxLinearSolveFailures``); once a step has shown CG indefiniteness, CG is
-  preconditioned by the abs-filtered Hessian (positive definite) for the rest of the step;
-  only when a truncated direction fails too (zero after a first negative curvature, or the
+  it (``SNESSetMaxLinearSolveFailures``); an ascent direction (negative curvature at CG's
+  first direction) is replaced by the abs-filtered Newton direction; once a step has shown CG
+  indefiniteness, CG is preconditioned by the abs-filtered Hessian (positive definite) for the
+  rest of the step; only when a direction fails too (zero after a first negative curvature, or the
   line search fails) does :meth:`HessianChoice.restart` continue the step filtered from its
   last iterate.
 
@@ -78,6 +79,8 @@ class HessianChoice:
         self._indefinite_seen = False  # auto with CG: CG met indefiniteness in this step
         self._pc_matrix = None  # auto with CG: the abs-filtered Hessian CG is preconditioned by
         self.filtered_preconditioners = 0  # iterations preconditioned by it (the whole run)
+        self.descent_solves = 0  # ascent directions of CG replaced (the whole run)
+        self._extra_linear_its = 0  # CG iterations of those replacements, this SNES solve
 
     def start_step(self) -> None:
         """Forget the previous step: counts, model, auto's state."""
@@ -87,10 +90,14 @@ class HessianChoice:
         self.restarts = self.truncated = 0
         self._indefinite_seen = False
 
-    def solved(self) -> None:
-        """After each SNES solve: count the truncated CG directions it took (``auto``)."""
+    def solved(self) -> int:
+        """After each SNES solve: count the truncated CG directions it took (``auto``);
+        returns the CG iterations of the descent directions it solved for
+        (:meth:`descent_direction`), which SNES does not count."""
         if self._truncated:
             self.truncated += self.snes.getLinearSolveFailures()
+        extra, self._extra_linear_its = self._extra_linear_its, 0
+        return extra
 
     def restart(self, reason: int, stalled: bool, x: PETSc.Vec) -> bool:
         """Whether ``auto`` continues a failed SNES solve filtered; if so x is reset.
@@ -228,7 +235,7 @@ class HessianChoice:
             problem.set_hessian_filter(how)
             problem.jacobian(snes, x, A, P)
         if self._truncated:
-            self._precondition(snes, x, A, filtered=how is None and self._cg_saw_indefinite(snes))
+            self._precondition(snes, x, A, how, self._cg_saw_indefinite(snes))
         self.its[how or "exact"] += 1
 
     def _cg_saw_indefinite(self, snes) -> bool:
@@ -240,32 +247,70 @@ class HessianChoice:
                 self._indefinite_seen = True
         return self._indefinite_seen
 
-    def _precondition(self, snes, x: PETSc.Vec, A: PETSc.Mat, filtered: bool) -> None:
+    def _precondition(self, snes, x: PETSc.Vec, A: PETSc.Mat, how: str | None,
+                      seen: bool) -> None:
         """``auto`` with CG: precondition by A itself or, once this step has shown CG an
-        indefinite matrix or preconditioner, by the abs-filtered Hessian, while CG still
-        runs on the exact Hessian A.
+        indefinite matrix or preconditioner (``seen``), by the abs-filtered Hessian, while CG
+        still runs on the exact Hessian A; a filtered A (``how``) preconditions itself.
 
         Truncated Newton-CG needs a symmetric positive definite preconditioner (Nocedal &
         Wright, Algorithm 7.1; Steihaug 1983): ICC(0) of an indefinite Hessian is none, and
         CG then stops after 2-3 iterations at ``DIVERGED_INDEFINITE_PC`` with a poor
         direction. The abs-filtered Hessian M + w K_|.| is positive definite, so CG stops
         only at true negative curvature of A, and runs to convergence (a Newton step) where
-        A is positive definite. Measured on the undamped ~55k-tetrahedron beam with
-        ``cg-icc``: 420 -> 368 Newton iterations over 60 frames, no retry, and every step
-        converged (step 55 was kept unconverged before). Costs one more assembly in those
-        iterations only (counted with the exact ones: the Newton matrix is exact).
+        A is positive definite. The preconditioning matrix is stored as AIJ whatever A's
+        storage: PETSc's ICC of a 3 x 3-block (BAIJ) matrix applies no positive-definite
+        shift and reported ``DIVERGED_INDEFINITE_PC`` on the (positive definite) filtered
+        Hessian of the crushed cube. One more assembly (or a conversion) in those
+        iterations only, counted with the Newton matrix's kind.
         """
         J, current, (callback, args, kargs) = snes.getJacobian()
-        if filtered:
-            if self._pc_matrix is None:
-                self._pc_matrix = A.duplicate(copy=False)
-            self.problem.set_hessian_filter("abs")
-            self.problem.jacobian(snes, x, self._pc_matrix, self._pc_matrix)
-            self.problem.set_hessian_filter(None)
+        filtered = how is not None or seen
+        if filtered and self._pc_matrix is None:
+            self._pc_matrix = self.problem.create_matrix("aij")
+        if how is not None:
+            A.convert("aij", self._pc_matrix)
+        elif seen:
+            self._assemble_abs(snes, x)
             self.filtered_preconditioners += 1
         wanted = self._pc_matrix if filtered else A
         if current.handle != wanted.handle:  # SNES passes (J, P) to the KSP after this call
             snes.setJacobian(callback, J, wanted, *(args or ()), **(kargs or {}))
+
+    def _assemble_abs(self, snes, x: PETSc.Vec) -> None:
+        """The abs-filtered Hessian at x into the AIJ preconditioning matrix."""
+        if self._pc_matrix is None:
+            self._pc_matrix = self.problem.create_matrix("aij")
+        self.problem.set_hessian_filter("abs")
+        self.problem.jacobian(snes, x, self._pc_matrix, self._pc_matrix)
+        self.problem.set_hessian_filter(None)
+
+    def descent_direction(self, x: PETSc.Vec, y: PETSc.Vec, r: PETSc.Vec) -> bool:
+        """``auto`` with CG: replace an ascent direction y of a failed CG solve by the
+        abs-filtered Newton direction (solves M + w K_|.| y = r); whether y was replaced.
+
+        PETSc's KSPCG (3.18 to 3.22) declares ``DIVERGED_INDEFINITE_MAT`` on a *change of
+        sign* of p^T A p between two directions: when the first direction already has
+        negative curvature it steps along it with a negative length and stops one
+        direction later, so its iterate is an ascent direction (r . y < 0: the line search
+        then fails down to lambda = 1e-12; seen on the crushed stable neo-Hookean cube,
+        where auto with ``cg-icc`` stopped at step 3). The filtered system is positive
+        definite, so its solution is a descent direction. Called before the line search
+        (:meth:`fem_anim.solver.Minimiser._precheck`); the iteration counts as ``abs``.
+        """
+        ksp = self.snes.getKSP()
+        if not self._truncated or ksp.getConvergedReason() >= 0 or r.dot(y) > 0.0:
+            return False
+        self._assemble_abs(self.snes, x)
+        self._indefinite_seen = True
+        ksp.setOperators(self._pc_matrix, self._pc_matrix)  # SNES sets its own again next
+        y.zeroEntries()
+        ksp.solve(r, y)
+        self._extra_linear_its += ksp.getIterationNumber()
+        self.descent_solves += 1
+        self.its["exact"] -= 1
+        self.its["abs"] += 1
+        return True
 
     def _truncate_cg(self) -> None:
         """``auto`` with CG: Newton takes CG's iterate when CG meets negative curvature.

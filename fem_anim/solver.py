@@ -256,8 +256,7 @@ class Minimiser:
             self._snes_solve(x, what)
             reason = self.snes.getConvergedReason()
             newton_its += self.snes.getIterationNumber()
-            linear_its += self.snes.getLinearSolveIterations()
-            self.hessian.solved()
+            linear_its += self.snes.getLinearSolveIterations() + self.hessian.solved()
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)
             spent = self.budget is not None and newton_its >= self.budget
@@ -425,8 +424,9 @@ class Minimiser:
         residual r at x is in ``self.b``: lambda^2 = r . y (seed definition 4). With the
         inversion filter on, y is halved until x - y has det F > 0 everywhere.
         """
+        replaced = self.hessian.descent_direction(x, y, self.b)  # auto with CG
         self._decrements.append(np.nan if self.saddle else 0.5 * abs(self.b.dot(y)))
-        scaled = self._contact_bound(x, y)
+        scaled = self._contact_bound(x, y) or replaced
         if self.problem.filter_inversion:
             scaled = self._filter_inverting(x, y) or scaled
         self.hessian.record_model(x, y)

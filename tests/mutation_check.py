@@ -251,6 +251,10 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_hessian_modes.py::"
               "test_auto_with_cg_preconditions_by_a_positive_definite_matrix",),
              "auto with CG keeps ICC(0) of the indefinite Hessian as its preconditioner"),
+    Mutation("cg-ascent-direction-kept", "fem_anim/newton_hessian.py",
+             "or r.dot(y) > 0.0:", "or r.dot(y) > -1e300:",
+             ("tests/test_hessian_modes.py::test_auto_with_cg_replaces_an_ascent_direction",),
+             "auto with CG keeps PETSc's ascent direction after negative curvature at once"),
     Mutation("damping-beta-ignored", "fem_anim/scene.py",
              'and (damping["alpha"] > 0 or damping["beta"] > 0)', 'and damping["alpha"] > 0',
              ("tests/test_cli.py::test_default_scene_outputs",),

@@ -93,6 +93,26 @@ def test_auto_with_cg_takes_truncated_newton_directions(tmp_path):
     assert press == pytest.approx(-0.17)
 
 
+def test_auto_with_cg_replaces_an_ascent_direction(tmp_path):
+    """The crushed stable neo-Hookean cube (h = 0.05) with cg-icc, 4 plain steps: at step 3
+    CG meets negative curvature at its first direction, and PETSc's CG then returns an ascent
+    direction (it stops on a sign change of p^T A p, one direction after stepping with a
+    negative length). auto replaces it by the abs-filtered Newton direction: the 4 steps
+    finish (before: step 3 stopped at snes_max_it after 54 iterations), each converged, as
+    shift's do (measured: auto 34 iterations, shift 29); exact stops at step 3."""
+    cg = 'preset = "cg-icc"'
+    with pytest.raises(ConvergenceError, match="step 3"):
+        run_steps(squash(tmp_path, "stable_neohookean", "exact", solver=cg), 4, 0.05)
+    sim = squash(tmp_path, "stable_neohookean", "auto", solver=cg)
+    state = sim.initial_state()
+    for _ in range(4):
+        state, stats = sim.step(state, 0.05)
+        assert stats.reason > 0
+    assert sim.minimiser.hessian.descent_solves >= 1
+    press = state.u.reshape(-1, 3)[sim.problem.moving_pins[0].dofs, 2]
+    assert press == pytest.approx(-0.17)
+
+
 def test_auto_with_cg_preconditions_by_a_positive_definite_matrix(tmp_path):
     """After CG has met indefiniteness in a step, auto preconditions CG by the abs-filtered
     Hessian (not by ICC(0) of the indefinite one) while CG still runs on the exact Hessian:
