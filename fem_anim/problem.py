@@ -239,29 +239,41 @@ class EnergyProblem:
         solver = scene["solver"]
         self.tangent_data = None
         self.hessian_mode = solver["hessian"] if not self.scheme.explicit else "exact"
-        filtered = None
-        if self.hessian_mode in FILTERED_MODES:
-            # the convex terms exactly, the elastic one filtered (gravity is linear)
+        correction = None
+        if self.contact is not None:
+            correction = self.contact.curvature_correction(du, dv)
+        if correction is not None:
+            jacobian += self.weight * correction  # sphere barriers: PSD-projected Hessian
+
+        def filtered_forms() -> dict[str, ufl.Form]:
+            """The Hessian with the elastic tangent filtered (the convex terms exactly;
+            gravity is linear) and, for the trust-region ratio's model, y^T H y of the exact
+            Hessian along a direction y."""
             filtered = ufl.derivative(ufl.derivative(convex, self.u, dv), self.u, du) + \
                 self._projected_elastic_hessian(du, dv)
             if contact_terms is not None:  # exact: not a function of F
                 filtered += self.weight * ufl.derivative(ufl.derivative(
                     contact_terms, self.u, dv), self.u, du)
-        if self.contact is not None and \
-                (correction := self.contact.curvature_correction(du, dv)) is not None:
-            jacobian += self.weight * correction  # sphere barriers: PSD-projected Hessian
-            if filtered is not None:
+            if correction is not None:
                 filtered += self.weight * correction
-        if self.hessian_mode in ("project", "abs", "trust_region_filter"):
-            jacobian, filtered = filtered, None  # the filtered Hessian is the only one
-        # y^T H y of the exact Hessian along a direction y (the trust-region ratio's model)
+            forms = {"jacobian_filtered": filtered}
+            if self.hessian_mode in ("trust_region_filter", "auto"):
+                self.direction = fem.Function(V, name="newton_direction")
+                forms["curvature"] = ufl.derivative(ufl.derivative(
+                    objective, self.u, self.direction), self.u, self.direction)
+            return forms
+
         self.direction = None
-        if self.hessian_mode in ("trust_region_filter", "auto"):
-            self.direction = fem.Function(V, name="newton_direction")
-            ufl_forms["curvature"] = ufl.derivative(ufl.derivative(
-                objective, self.u, self.direction), self.u, self.direction)
-        if filtered is not None:
-            ufl_forms["jacobian_filtered"] = filtered
+        #: auto: the filtered forms, built and compiled at their first use
+        #: (:meth:`_compile_filtered`): a scene that never meets an indefinite Hessian pays
+        #: no JIT for them
+        self._lazy_filtered = None
+        if self.hessian_mode in ("project", "abs", "trust_region_filter"):
+            extra = filtered_forms()  # the filtered Hessian is the only one
+            jacobian = extra.pop("jacobian_filtered")
+            ufl_forms |= extra
+        elif self.hessian_mode == "auto":
+            self._lazy_filtered = filtered_forms
         self.filter_inversion = solver["inversion_filter"]
         if self.filter_inversion is None:
             self.filter_inversion = self.mixed or any(m.requires_positive_J
@@ -591,6 +603,8 @@ class EnergyProblem:
         Raises:
             ValueError: a filter asked of a problem built without the filtered form.
         """
+        if how is not None:
+            self._compile_filtered()
         if how is None:
             if self.hessian_mode in ("project", "abs", "trust_region_filter"):
                 raise ValueError(f"solver.hessian = {self.hessian_mode!r} has no exact Hessian")
@@ -603,8 +617,21 @@ class EnergyProblem:
             self._active_jacobian = self.jacobian_filtered_form or self.jacobian_form
         self.hessian_filter = how
 
+    def _compile_filtered(self) -> None:
+        """``auto``: build and compile the filtered Hessian and y^T H y at their first use
+        (collective: every rank reaches it at the same Newton iteration)."""
+        if self._lazy_filtered is None:
+            return
+        forms, self._lazy_filtered = self._lazy_filtered(), None
+        start = time.perf_counter()
+        compiled = compile_forms(forms)
+        self.compile_s += time.perf_counter() - start
+        self.jacobian_filtered_form = compiled["jacobian_filtered"]
+        self.curvature_form = compiled["curvature"]
+
     def curvature(self, x: PETSc.Vec, y: PETSc.Vec) -> float:
         """y^T H(x) y with H the exact (unfiltered) Hessian of g, summed over all ranks."""
+        self._compile_filtered()
         self.set_state(x)
         direction = compat.petsc_vec(self.direction)
         y.copy(direction)

@@ -2,7 +2,8 @@
 
 A mode fills the ``[solver]`` keys a scene (or ``--set``) did not give; every key given
 explicitly still wins, as does ``--solver`` on the command line. ``"exact"`` (the default)
-fills nothing: Newton to the residual test of the preset (seed section 3.2, eq. 10).
+fills ``hessian = "auto"`` (Newton's exact Hessian until it is indefinite: README "Hessian
+modes on hard steps"): Newton to the residual test of the preset (seed section 3.2, eq. 10).
 
 ``"preview"`` is one Newton step per time step, accepted unconverged when it decreased the
 step objective (``max_iterations = 1``, ``on_budget = "accept"``: the linearly implicit step
@@ -22,8 +23,8 @@ tetrahedra it runs about 2.5x faster than the fastest exact configuration, with 
 percent off. Every step it accepts without meeting the residual test is marked in stats.csv
 (reason 7, ``residual_ratio``), so the inexactness is visible. A mixed (u, p) scene keeps its
 saddle-point preset and exact Hessian; a scene whose regions use several material models, or
-that names another ``method`` or a ``hessian_update``, keeps the exact Hessian (``auto``
-filters one model's tangent, and a kept Hessian is never filtered).
+that names another ``method`` or a ``hessian_update``, keeps the exact Hessian in either mode
+(``auto`` filters one model's tangent, and a kept Hessian is never filtered).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ __all__ = ["SOLVER_MODES", "apply_solver_mode"]
 
 #: ``solver.mode`` -> the ``[solver]`` keys it fills when the scene leaves them out.
 SOLVER_MODES: dict[str, dict[str, Any]] = {
-    "exact": {},
+    "exact": {"hessian": "auto"},
     "preview": {"max_iterations": 1, "on_budget": "accept", "preset": "cg-icc",
                 "hessian": "auto", "petsc": {"ksp_rtol": 1e-4}},
 }
@@ -47,16 +48,16 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
 
     Leaves anything malformed to the validator (an unknown mode, a non-table).
     """
-    solver = raw.get("solver")
-    if not isinstance(solver, dict) or not isinstance(solver.get("mode"), str) or \
-            solver["mode"] not in SOLVER_MODES:
+    solver = raw.setdefault("solver", {})
+    mode = solver.get("mode", "exact") if isinstance(solver, dict) else None  # schema default
+    if not isinstance(mode, str) or mode not in SOLVER_MODES:
         return
     element = raw.get("element")
     mixed = isinstance(element, dict) and element.get("formulation") == "mixed"
     keep_exact = mixed or solver.get("method", "newton") != "newton" or \
         solver.get("hessian_update", "every_iteration") != "every_iteration" or \
         _several_models(raw)
-    for key, value in SOLVER_MODES[solver["mode"]].items():
+    for key, value in SOLVER_MODES[mode].items():
         if key == "preset" and mixed:
             continue  # the saddle point needs ldlt, lu or schur (fem_anim.mixed)
         if key == "hessian" and keep_exact:
@@ -80,11 +81,18 @@ def _fill_petsc(solver: dict[str, Any], options: dict[str, Any]) -> None:
 
 
 def _several_models(raw: dict[str, Any]) -> bool:
-    """Whether a body's regions give a material model of their own (raw scene tables)."""
+    """Whether the scene's bodies or regions use more than one material model (raw scene
+    tables; a body without a model counts as the default one)."""
     bodies = raw.get("body") if isinstance(raw.get("body"), list) else [raw]
+    models = set()
     for body in bodies:
-        regions = body.get("region") if isinstance(body, dict) else None
+        if not isinstance(body, dict):
+            continue
+        material = body.get("material")
+        model = material.get("model") if isinstance(material, dict) else None
+        models.add(model if isinstance(model, str) else None)  # else: the validator names it
+        regions = body.get("region")
         if isinstance(regions, list) and any(isinstance(r, dict) and "model" in r
                                              for r in regions):
             return True
-    return False
+    return len(models) > 1

@@ -93,6 +93,28 @@ def test_auto_with_cg_takes_truncated_newton_directions(tmp_path):
     assert press == pytest.approx(-0.17)
 
 
+def test_auto_is_the_default_and_compiles_its_filtered_forms_at_first_use(tmp_path):
+    """The default scene's Hessian mode is auto; on easy steps it compiles nothing more than
+    exact (the filtered Hessian and y^T H y are built at the first filtered iteration): the
+    coarse beam's 3 steps leave them unbuilt, the crushed StVK cube (negative pivots in
+    MUMPS's factorisation) builds them, and mixed scenes keep exact."""
+    scene = load_scene(None, ["mesh.element_size=0.1", "output.render=false"])
+    assert scene["solver"]["hessian"] == "auto"
+    sim = Simulation(scene, MPI.COMM_WORLD)
+    state = sim.initial_state()
+    for _ in range(3):
+        state, stats = sim.step(state, 1 / 60)
+        assert _kinds(stats) == {"exact": stats.newton_its}
+    assert sim.problem.jacobian_filtered_form is None and sim.problem.tangent_data is None
+    cube = squash(tmp_path, hessian="auto", element_size=0.1)
+    assert cube.problem.jacobian_filtered_form is None
+    run_steps(cube, 4, 0.05)
+    assert cube.problem.jacobian_filtered_form is not None
+    mixed = load_scene(None, ["element.degree=2", 'element.formulation="mixed"',
+                              "damping.beta=0"])
+    assert mixed["solver"]["hessian"] == "exact"
+
+
 def test_auto_with_cg_replaces_an_ascent_direction(tmp_path):
     """The crushed stable neo-Hookean cube (h = 0.05) with cg-icc, 4 plain steps: at step 3
     CG meets negative curvature at its first direction, and PETSc's CG then returns an ascent

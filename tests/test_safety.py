@@ -181,7 +181,9 @@ def test_interrupted_mpi_run_leaves_a_resumable_directory(tmp_path):
 # -- 3. one run per directory -------------------------------------------------------------------
 def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
     out = tmp_path / "run"
-    args = ["run", "-q", *COARSE, "--set", "time.steps=200", "--set",
+    # 600 coarse steps: the first run must outlive the second's start-up (200 steps raced
+    # it on Debian 13 at load ~4: the first had finished when the second was refused)
+    args = ["run", "-q", *COARSE, "--set", "time.steps=600", "--set",
             "output.checkpoint_every=5", "-o", str(out)]
     first = start(args)
     wait_for_rows(out, 12, first)
@@ -193,10 +195,10 @@ def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
     os.killpg(first.pid, signal.SIGKILL)  # dies holding the lock
     first.wait()
     assert (out / LOCK).read_text().strip() == str(first.pid)  # a stale lock file
-    resumed = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=200", "--set",
+    resumed = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=600", "--set",
                         "output.checkpoint_every=5", "--resume", str(out)])
     assert resumed.returncode == 0, resumed.stderr
-    assert frames(out / "trajectory.xdmf") == 201
+    assert frames(out / "trajectory.xdmf") == 601
 
 
 # -- 1. only fem_anim's own files ------------------------------------------------------------
