@@ -153,3 +153,13 @@ def test_preview_under_mpi_equals_serial(tmp_path):
     rows = [read_stats(tmp_path / f"n{n}" / "stats.csv") for n in (1, 2)]
     assert [int(r["newton_its"]) for r in rows[0]] == [int(r["newton_its"]) for r in rows[1]] \
         == [1] * 4
+
+
+def test_the_benches_against_peers_run_the_undamped_beam():
+    """pbatoolkit's beam has no damping; the default scene has (beta = 1e-4): the benches
+    that compare with it and with the numpy reference switch it off."""
+    from fem_anim.bench.peers import SCENE_SETTINGS
+    from fem_anim.bench.preview import BEAM
+
+    assert load_scene(None, [])["damping"]["beta"] > 0
+    assert not load_scene(None, BEAM).damped and not load_scene(None, SCENE_SETTINGS).damped
