@@ -325,20 +325,20 @@ def jit_locks_released(jit_options: dict | None = None):
     """Release the JIT-cache locks that a compile interrupted inside this block leaves.
 
     FFCx (0.5 and 0.9 alike) takes ``<module>.c`` in the cache as a lock and writes
-    ``<module>.c.cached`` when the module is ready; on an Exception it renames the lock to
-    ``.c.failed``, but a KeyboardInterrupt or a kill leaves it, and every later compile of
-    that module waits ``timeout`` seconds and fails ("JIT compilation timed out"). When the
-    block ends with a BaseException that is not an Exception (KeyboardInterrupt, SystemExit),
-    the locks made since it began that have no ``.c.cached`` are renamed as FFCx does.
+    ``<module>.c.cached`` when the module is ready; on an Exception raised inside its compile
+    it renames the lock to ``.c.failed``, but a KeyboardInterrupt, or any exception raised
+    between its creating the lock (``get_cached_module``) and entering its ``try`` (a signal's
+    :class:`~fem_anim.errors.Interrupted` landing there: seen once under load), leaves it, and
+    every later compile of that module waits ``timeout`` seconds and fails ("JIT compilation
+    timed out"). When the block ends with any exception, the locks made since it began that
+    have no ``.c.cached`` are renamed as FFCx does (one FFCx already renamed is gone).
     """
     options = jit.get_parameters(jit_options) if LEGACY else jit.get_options(jit_options)
     cache = Path(str(options["cache_dir"])).expanduser()
     since = time.time() - 1.0
     try:
         yield
-    except BaseException as err:
-        if isinstance(err, Exception):  # FFCx released its lock itself
-            raise
+    except BaseException:
         for lock in cache.glob("libffcx_*.c"):
             try:
                 if lock.stat().st_mtime >= since and \

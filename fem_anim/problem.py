@@ -624,7 +624,8 @@ class EnergyProblem:
             return
         forms, self._lazy_filtered = self._lazy_filtered(), None
         start = time.perf_counter()
-        compiled = compile_forms(forms)
+        with compat.jit_locks_released(JIT_OPTIONS):
+            compiled = compile_forms(forms)
         self.compile_s += time.perf_counter() - start
         self.jacobian_filtered_form = compiled["jacobian_filtered"]
         self.curvature_form = compiled["curvature"]

@@ -255,6 +255,13 @@ MUTATIONS: list[Mutation] = [
              "or r.dot(y) > 0.0:", "or r.dot(y) > -1e300:",
              ("tests/test_hessian_modes.py::test_auto_with_cg_replaces_an_ascent_direction",),
              "auto with CG keeps PETSc's ascent direction after negative curvature at once"),
+    Mutation("jit-lock-left-on-exception", "fem_anim/compat.py",
+             "    except BaseException:\n        for lock in",
+             "    except BaseException as err:\n        if isinstance(err, Exception):\n"
+             "            raise\n        for lock in",
+             ("tests/test_safety.py::"
+              "test_an_interruption_between_ffcx_lock_and_compile_leaves_no_lock",),
+             "a signal's Interrupted between FFCx's lock and its try leaves the lock"),
     Mutation("damping-beta-ignored", "fem_anim/scene.py",
              'and (damping["alpha"] > 0 or damping["beta"] > 0)', 'and damping["alpha"] > 0',
              ("tests/test_cli.py::test_default_scene_outputs",),

@@ -546,6 +546,32 @@ def test_demos_write_no_tracked_file():
         assert "savefig(HERE" not in text, demo.name
 
 
+def test_an_interruption_between_ffcx_lock_and_compile_leaves_no_lock(tmp_path):
+    """The race behind a rare failure of the test below (SIGTERM, machine loaded): FFCx creates
+    its lock ``<module>.c`` and only then enters the ``try`` that renames it on an Exception;
+    a signal's Interrupted (an Exception) raised in between left the lock, and every later
+    compile of that module timed out. Reproduced deterministically: a lock made inside the
+    block, then Interrupted; a finished module (``.c.cached``) and an older lock stay."""
+    from fem_anim import compat
+    from fem_anim.errors import Interrupted
+
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    old = cache / "libffcx_forms_old.c"
+    old.touch()
+    os.utime(old, (time.time() - 3600, time.time() - 3600))  # another run's, long ago
+    done = cache / "libffcx_forms_done.c"
+    with pytest.raises(Interrupted):
+        with compat.jit_locks_released({"cache_dir": str(cache)}):
+            open(cache / "libffcx_forms_new.c", "x").close()  # FFCx's get_cached_module
+            done.touch()
+            done.with_suffix(".c.cached").touch()
+            raise Interrupted("interrupted by SIGTERM while setting up", signal.SIGTERM)
+    assert not (cache / "libffcx_forms_new.c").exists()
+    assert (cache / "libffcx_forms_new.c.failed").exists()
+    assert done.exists() and old.exists()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_while_compiling_leaves_no_jit_lock(tmp_path, sig):
     """Stopped while FFCx compiles the forms (a fresh cache), the run ends with one line and
