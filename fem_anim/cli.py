@@ -19,7 +19,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .console import print_error, quiet_jit_logging
+from .console import OneLineParser, print_error, quiet_jit_logging
 from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
 from .petsc_options import check_cli_options, init_petsc, split_petsc_args
 
@@ -28,14 +28,9 @@ __all__ = ["main", "build_parser"]
 EXIT_USAGE = 2
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # argparse's own errors: one line, exit 2, like ours
-        raise FemAnimError(message)
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="fem-anim", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    parser = OneLineParser(prog="fem-anim", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     run = sub.add_parser("run", help="simulate a scene (default: the hanging beam)")
     run.add_argument("scene", nargs="?", help="scene TOML file (default: embedded hanging beam)")
     run.add_argument("-o", "--output", help="output directory (default out/<scene name>)")

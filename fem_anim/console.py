@@ -6,10 +6,23 @@ which both sit above this module (STYLE rule 15).
 
 from __future__ import annotations
 
+import argparse
 import logging
 import sys
 
-__all__ = ["print_error", "quiet_jit_logging"]
+from .errors import FemAnimError
+
+__all__ = ["OneLineParser", "print_error", "quiet_jit_logging"]
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """argparse whose own errors are a :class:`~fem_anim.errors.FemAnimError` (``prefix`` +
+    message): the caller prints them as one line and exits with code 2, like every other."""
+
+    prefix = ""
+
+    def error(self, message):
+        raise FemAnimError(self.prefix + message)
 
 
 def print_error(message: str) -> None:

@@ -21,7 +21,6 @@ displacement. Time: mean wall seconds per step, and the ratio to fem_anim's.
 
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
@@ -201,16 +200,12 @@ def _load() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..console import print_error
+    from ..console import OneLineParser, print_error
     from ..petsc_options import init_petsc
 
     init_petsc([])
 
-    class Parser(argparse.ArgumentParser):
-        def error(self, message):
-            raise FemAnimError(message)
-
-    p = Parser(prog="python -m fem_anim.bench.peers", description=__doc__.split("\n")[0])
+    p = OneLineParser(prog="python -m fem_anim.bench.peers", description=__doc__.split("\n")[0])
     p.add_argument("scene", nargs="?")
     p.add_argument("--sizes", default=",".join(map(str, PEER_SIZES)))
     p.add_argument("--steps", type=int, default=10)

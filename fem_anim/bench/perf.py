@@ -35,6 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from ..console import OneLineParser
 from ..errors import FemAnimError
 
 __all__ = ["main", "build_parser", "run_config", "DEFAULT_SIZES", "DEFAULT_PRESETS"]
@@ -48,11 +49,6 @@ DIRECT_MIN_SIZE = 0.0125
 REFERENCE_BLAS = ("/usr/lib/x86_64-linux-gnu/blas", "/usr/lib/x86_64-linux-gnu/lapack")
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise FemAnimError(message)
-
-
 def _floats(text: str) -> list[float]:
     try:
         values = [float(v) for v in text.split(",") if v]
@@ -64,7 +60,7 @@ def _floats(text: str) -> list[float]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="fem-anim bench --perf", description=__doc__.split("\n")[0])
+    p = OneLineParser(prog="fem-anim bench --perf", description=__doc__.split("\n")[0])
     p.add_argument("scene", nargs="?", help="scene TOML (default: the hanging beam)")
     p.add_argument("--sizes", type=_floats, default=list(DEFAULT_SIZES),
                    help="comma-separated mesh.element_size values")

@@ -27,7 +27,6 @@ configuration whose step fails is listed with the step where it stopped.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -220,16 +219,12 @@ def split_text(splits: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..console import print_error
+    from ..console import OneLineParser, print_error
     from ..petsc_options import init_petsc
 
     init_petsc([])
 
-    class Parser(argparse.ArgumentParser):
-        def error(self, message):
-            raise FemAnimError(message)
-
-    p = Parser(prog="python -m fem_anim.bench.preview", description=__doc__.split("\n")[0])
+    p = OneLineParser(prog="python -m fem_anim.bench.preview", description=__doc__.split("\n")[0])
     p.add_argument("--divisions", action="append", default=[],
                    help="cubes per axis, NX,NY,NZ (repeat for several meshes)")
     p.add_argument("--steps", type=int, default=60)

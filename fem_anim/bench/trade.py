@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..console import OneLineParser
 from ..errors import FemAnimError, SceneError
 from .sweep import expand_study
 
@@ -40,9 +41,8 @@ COLUMNS = ["label", "status", "dofs", "steps", "retries", "newton_its", "linear_
            "error_l2", "error_probe", "energy_drift", "energy_excursion", "damped"]
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise FemAnimError(f"bench: {message}")
+class _Parser(OneLineParser):
+    prefix = "bench: "
 
 
 def build_parser() -> argparse.ArgumentParser:
