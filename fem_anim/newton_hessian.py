@@ -33,7 +33,7 @@ from petsc4py import PETSc
 from .errors import ConvergenceError
 from .hessian import ShiftStrategy, model_ratio, trust_region_choice
 
-__all__ = ["HessianChoice", "HESSIAN_KINDS", "MAX_AUTO_RESTARTS"]
+__all__ = ["HessianChoice", "HESSIAN_KINDS", "MAX_AUTO_RESTARTS", "cg_probe"]
 
 #: The Hessians a Newton iteration may use (counted per step):
 #: exact, exact + c I with c > 0, elastic tangent clamped, elastic tangent abs-filtered.
@@ -44,6 +44,24 @@ _AUTO_RESTART = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
                  PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
 #: How often one step of ``auto`` may continue after such a failure.
 MAX_AUTO_RESTARTS = 4
+
+
+def cg_probe(A: PETSc.Mat, pc_type: str = "jacobi", rtol: float = 1e-6,
+             max_it: int = 200) -> int:
+    """The KSP reason of CG on A z = b for a random b (collective): ``DIVERGED_INDEFINITE_MAT``
+    shows negative curvature of A (under an SPD preconditioner)."""
+    probe = PETSc.KSP().create(A.getComm())
+    probe.setOperators(A, A)
+    probe.setType("cg")
+    probe.getPC().setType(pc_type)
+    probe.setTolerances(rtol=rtol, max_it=max_it)
+    b, z = A.createVecs()
+    b.setRandom()
+    probe.solve(b, z)
+    reason = probe.getConvergedReason()
+    for obj in (probe, b, z):
+        obj.destroy()
+    return reason
 
 
 class HessianChoice:
@@ -271,10 +289,8 @@ class HessianChoice:
         """
         J, current, (callback, args, kargs) = snes.getJacobian()
         filtered = how is not None or seen
-        if filtered and self._pc_matrix is None:
-            self._pc_matrix = self.problem.create_matrix("aij")
         if how is not None:
-            A.convert("aij", self._pc_matrix)
+            A.convert("aij", self._aij_matrix())
             self._pc_current = False
         elif seen and not self._pc_current:  # once per step: a preconditioner need not be
             self._assemble_abs(snes, x)        # current, and its ICC factor is kept with it
@@ -284,12 +300,17 @@ class HessianChoice:
         if current.handle != wanted.handle:  # SNES passes (J, P) to the KSP after this call
             snes.setJacobian(callback, J, wanted, *(args or ()), **(kargs or {}))
 
-    def _assemble_abs(self, snes, x: PETSc.Vec) -> None:
-        """The abs-filtered Hessian at x into the AIJ preconditioning matrix."""
+    def _aij_matrix(self) -> PETSc.Mat:
+        """The AIJ preconditioning matrix (made at its first use)."""
         if self._pc_matrix is None:
             self._pc_matrix = self.problem.create_matrix("aij")
+        return self._pc_matrix
+
+    def _assemble_abs(self, snes, x: PETSc.Vec) -> None:
+        """The abs-filtered Hessian at x into the AIJ preconditioning matrix."""
+        P = self._aij_matrix()
         self.problem.set_hessian_filter("abs")
-        self.problem.jacobian(snes, x, self._pc_matrix, self._pc_matrix)
+        self.problem.jacobian(snes, x, P, P)
         self.problem.set_hessian_filter(None)
 
     def descent_direction(self, x: PETSc.Vec, y: PETSc.Vec, r: PETSc.Vec) -> bool:
@@ -390,18 +411,7 @@ class HessianChoice:
                 pass  # this factorisation reports no inertia: ask CG instead
             finally:
                 PETSc.Sys.popErrorHandler()
-        probe = PETSc.KSP().create(A.getComm())
-        probe.setOperators(A, A)
-        probe.setType("cg")
-        probe.getPC().setType("jacobi")
-        probe.setTolerances(rtol=1e-6, max_it=200)
-        b, z = A.createVecs()
-        b.setRandom()
-        probe.solve(b, z)
-        indefinite = probe.getConvergedReason() == PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
-        for obj in (probe, b, z):
-            obj.destroy()
-        return not indefinite
+        return cg_probe(A) != PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
 
     def destroy(self) -> None:
         if self._pc_matrix is not None:
