@@ -8,6 +8,9 @@
 :mod:`forms.integrator`), takes the residual and Jacobian by ``ufl.derivative`` of
 that single form (STYLE rule 2), compiles everything once, and offers the assembly
 callbacks a PETSc SNES needs (:meth:`objective`, :meth:`residual`, :meth:`jacobian`).
+The terms whose Hessian is constant (inertia, Rayleigh damping, gravity) are assembled once
+as matrices and a vector from their ``ufl.derivative`` and added by matrix-vector products
+(:mod:`fem_anim.constant_terms`); the callbacks assemble w times the rest of E per call.
 Only terms the scene declares are built: without ``[gravity]`` there is no gravity
 form, without ``[[obstacle]]`` no contact form (:mod:`fem_anim.contact`); with ``[[region]]``
 entries (:mod:`fem_anim.region`) the elastic energy is one integral per material model in
@@ -57,6 +60,7 @@ from fem_anim.forms.mixed import MIXED_MATERIALS, compliance, lagrangian
 
 from . import compat
 from .body import body_pins, body_regions
+from .constant_terms import ConstantTerms, QuadraticTerm
 from .contact import ObstacleContact
 from .hessian import FILTERS, project_psd
 from .ipc_contact import IPCContact
@@ -200,8 +204,10 @@ class EnergyProblem:
             self.contact = ObstacleContact(scene["obstacle"], self.u, self.u_prev, degree,
                                            mat["youngs_modulus"])
         potential = potential_u = elastic_u if gravity_u is None else elastic_u + gravity_u
+        varying = elastic_u  # the potential's terms whose Hessian changes with u
         if self.contact is not None:
             potential = potential_u = potential_u + self.contact.energy
+            varying = varying + self.contact.energy
         if self.scheme.explicit:
             # Symplectic Euler: E linearised at u_prev, grad E(u_prev) . u (forms/integrator.py)
             at_prev = self._elastic_energy(self.u_prev)
@@ -222,6 +228,7 @@ class EnergyProblem:
                 self.contact.energy + self.contact.friction
             if self.contact.friction is not None:
                 potential += self.contact.friction
+                varying += self.contact.friction
         convex = inertia_forms.inertia(u_obj, self.u_pred, self.rho, self.dx_mass)
         unknown = self.fields.w if self.mixed else self.u
         du, dv = ufl.TrialFunction(unknown.function_space), ufl.TestFunction(
@@ -234,7 +241,12 @@ class EnergyProblem:
             ufl_forms["damping_force"] = ufl.derivative(
                 self._dissipation(self.v, zero, 1.0), self.v, dv_V)
         objective = step_objective(convex, potential, self.weight)
-        residual = ufl.derivative(objective, unknown, dv)
+        #: the inertia, damping and gravity terms as matrices and a vector assembled once
+        #: (:mod:`fem_anim.constant_terms`); the forms assembled per call hold w times the
+        #: rest. Not for the mixed saddle point or the explicit scheme.
+        self.split_constant = not self.mixed and not self.scheme.explicit
+        assembled = self.weight * varying if self.split_constant else objective
+        residual = ufl.derivative(assembled, unknown, dv)
         jacobian = ufl.derivative(residual, unknown, du)
         solver = scene["solver"]
         self.tangent_data = None
@@ -249,8 +261,9 @@ class EnergyProblem:
             """The Hessian with the elastic tangent filtered (the convex terms exactly;
             gravity is linear) and, for the trust-region ratio's model, y^T H y of the exact
             Hessian along a direction y."""
-            filtered = ufl.derivative(ufl.derivative(convex, self.u, dv), self.u, du) + \
-                self._projected_elastic_hessian(du, dv)
+            filtered = self._projected_elastic_hessian(du, dv)
+            if not self.split_constant:
+                filtered += ufl.derivative(ufl.derivative(convex, self.u, dv), self.u, du)
             if contact_terms is not None:  # exact: not a function of F
                 filtered += self.weight * ufl.derivative(ufl.derivative(
                     contact_terms, self.u, dv), self.u, du)
@@ -286,7 +299,7 @@ class EnergyProblem:
             if solver["inversion_filter"] is None and self.material_map is not None:
                 self.det_dofs = self._positive_J_dofs()
         ufl_forms |= {
-            "objective": objective,
+            "objective": assembled,
             "residual": residual,
             "jacobian": jacobian,
             "kinetic": inertia_forms.kinetic_energy(self.v, self.rho, self.dx_mass),
@@ -296,6 +309,14 @@ class EnergyProblem:
         }
         if gravity_u is not None:
             ufl_forms["gravity"] = gravity_u
+        if self.split_constant:
+            if scene.damped:  # else the convex terms' Hessian is the mass form
+                ufl_forms["constant_hessian"] = ufl.derivative(ufl.derivative(
+                    convex, self.u, dv), self.u, du)
+                ufl_forms["damping_hessian"] = ufl.derivative(ufl.derivative(
+                    self._dissipation(self.u, self.u_anchor, 1.0), self.u, dv), self.u, du)
+            if gravity_u is not None:
+                ufl_forms["gravity_gradient"] = ufl.derivative(gravity_u, self.u, dv)
         if self.contact is not None:
             ufl_forms["contact"] = self.contact.energy
         # per-cell int_K psi dX, for the energy density field of the frames (last: keeps the
@@ -345,6 +366,16 @@ class EnergyProblem:
             mu_value, inv_kappa = float(self.mu.value), float(self.inv_kappa.value)
             self.schur = SchurPreconditioner(self.fields, compiled["pressure_mass"],
                                              mu_value * (1.0 + mu_value * inv_kappa))
+        self.constant_terms = None
+        if self.split_constant:
+            terms = [QuadraticTerm(self.mass_form, self.u_pred)]
+            if "damping_hessian" in compiled:
+                terms.append(QuadraticTerm(compiled["damping_hessian"], self.u_anchor,
+                                           self.damping_coefficient))
+            linear = (compiled["gravity_gradient"], self.weight) \
+                if "gravity_gradient" in compiled else None
+            self.constant_terms = ConstantTerms(
+                terms, compiled.get("constant_hessian", self.mass_form), self.bcs, linear)
         self.ipc = None  # [contact]: IPC barrier between surfaces (fem_anim/ipc_contact.py)
         if "contact" in scene.data:
             pinned = np.concatenate([bc.dof_indices()[0] for bc in self.displacement_bcs] +
@@ -569,6 +600,8 @@ class EnergyProblem:
             value = np.inf  # a contact point on or through an obstacle: the barrier is +inf
         else:
             value = self.assemble_scalar(self.objective_form)
+            if self.constant_terms is not None:
+                value += self.constant_terms.value(x)
             if self.ipc is not None:  # the barrier: +inf at contact
                 value += float(self.weight.value) * self.ipc.energy()
         EVENTS["objective"].end()
@@ -586,15 +619,26 @@ class EnergyProblem:
         # the lifting reads x at ghost dofs too: those of the state u (set_state updated
         # them), not x's own ghost entries, which SNES never updates (a line-search trial's
         # are stale: under MPI the residual then disagreed with g near pinned dofs owned
-        # by another rank)
-        fem_petsc.apply_lifting(b, [self.jacobian_form], [self.bcs],
-                                [compat.petsc_vec(self.unknown)], -1.0)
+        # by another rank). It adds J (u_bc - x) over the pinned dofs: nothing when this
+        # rank's pinned dofs hold their values exactly, as after a start at u_bc (skipped
+        # then: 18 % of a residual on the 11.5k beam; rank-local, no communication inside).
+        if not self._pins_on_target():
+            fem_petsc.apply_lifting(b, [self.jacobian_form], [self.bcs],
+                                    [compat.petsc_vec(self.unknown)], -1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self.constant_terms is not None:
+            self.constant_terms.add_gradient(b, x)
         if self.ipc is not None:
             self.ipc.add_gradient(b, float(self.weight.value))
         fem_petsc.set_bc(b, self.bcs, x, -1.0)
         EVENTS["residual"].end()
         self.assembly_s += time.perf_counter() - start
+
+    def _pins_on_target(self) -> bool:
+        """Whether every pinned node of this rank (ghosts included) has u = u_bc exactly."""
+        u = self.u.x.array.reshape(-1, self.d)
+        u_bc = self.u_bc.x.array.reshape(-1, self.d)
+        return all(np.array_equal(u[dofs], u_bc[dofs]) for dofs in self._pin_dofs)
 
     def set_hessian_filter(self, how: str | None) -> None:
         """Assemble the next Hessians exact (``None``) or with the elastic tangent filtered
@@ -656,6 +700,8 @@ class EnergyProblem:
             A.assemble(PETSc.Mat.AssemblyType.FLUSH)
             self.ipc.add_hessian(A, float(self.weight.value))
         A.assemble()
+        if self.constant_terms is not None:
+            self.constant_terms.add_hessian(A, subset=self.ipc is not None)
         if self.schur is not None:
             self.schur.update(float(self.weight.value))
         EVENTS["jacobian"].end()

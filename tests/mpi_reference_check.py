@@ -12,9 +12,10 @@ them, and every DOLFINx result is brought back to rank 0 in input vertex order
 1. elastic energy, gradient (``ufl.derivative`` of ``EnergyProblem.ufl_elastic``) and Hessian
    at a randomly perturbed state; the matrices are compared through their action ``H z`` on
    random vectors (PETSc ``mult`` on the distributed matrix, result gathered);
-2. the step objective, residual and Jacobian that SNES minimises (``objective_form``,
-   ``residual_form``, ``jacobian_form``) with a random predictor, the mass matrix (``M z``)
-   and the kinetic energy;
+2. the step objective, residual and Jacobian that SNES minimises (the callbacks
+   ``EnergyProblem.objective``, ``residual``, ``jacobian``: assembled forms plus the constant
+   terms of :mod:`fem_anim.constant_terms`) with a random predictor, the mass matrix
+   (``M z``) and the kinetic energy;
 3. ten steps of a beam pinned at ``x = 0`` and hanging under gravity, stepped by
    :class:`fem_anim.simulation.Simulation` across the ranks, against
    :func:`fem_anim.reference.simulate`.
@@ -151,16 +152,37 @@ class Distributed:
     def vector(self, form) -> np.ndarray | None:
         b = fem_petsc.assemble_vector(form)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return self._collect(b)
+
+    def _collect(self, b: PETSc.Vec) -> np.ndarray | None:
         b.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         with b.localForm() as local:
             out = self.map.collect(local.array.copy())
         b.destroy()
         return out
 
+    def _state(self) -> PETSc.Vec:
+        return compat.petsc_vec(self.problem.u).copy()
+
+    def step_callbacks(self, probes: list[np.ndarray]):
+        """The objective, residual and Jacobian actions SNES gets at the current u (the
+        assembled forms plus the constant terms, :mod:`fem_anim.constant_terms`)."""
+        p = self.problem
+        value = p.objective(None, self._state())
+        b = p.create_vector()
+        p.residual(None, self._state(), b)
+        A = p.create_matrix()
+        p.jacobian(None, self._state(), A, A)
+        return value, self._collect(b), self.actions(A, probes)
+
     def actions(self, form, probes: list[np.ndarray]) -> list[np.ndarray] | None:
-        """``A z`` for each global ``z``, the matrix assembled and applied across the ranks."""
-        A = fem_petsc.assemble_matrix(form)
-        A.assemble()
+        """``A z`` for each global ``z``, the matrix (a form: assembled) applied across the
+        ranks."""
+        if isinstance(form, PETSc.Mat):
+            A = form
+        else:
+            A = fem_petsc.assemble_matrix(form)
+            A.assemble()
         work = compat.petsc_vec(self.problem.u)
         z, y = work.duplicate(), work.duplicate()
         out = []
@@ -247,8 +269,7 @@ def compare_assembly(report: Report, beam: Beam, directory: Path, material: str,
     p.weight.value = w
     c.set_function(p.u_pred, y - beam.X)
     c.set_positions(x)
-    step = (c.scalar(p.objective_form), c.vector(p.residual_form),
-            c.actions(p.jacobian_form, probes))
+    step = c.step_callbacks(probes)
     M_actions = c.actions(p.mass_form, probes)
     c.set_function(p.v, probes[0])
     kinetic = c.scalar(p.energy_forms["kinetic"])

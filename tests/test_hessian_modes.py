@@ -299,12 +299,18 @@ def test_default_scene_3000_steps_without_a_retry():
 
 def test_default_scene_3000_steps_coarse():
     """The reduced variant (CI): the same scene at mesh.element_size = 0.1 runs 3000 frames
-    without a retry; undamped, the same mesh needs its first retries by t = 15 s (measured:
-    from t = 12.8 s; 117 retries, then a stop at time.min_dt at t = 44.2 s), so the damping,
-    not the coarse mesh, is what lets it finish."""
+    without a retry; undamped, the same mesh retries, or stops, within the same 50 s, so the
+    damping, not the coarse mesh, is what lets it finish. (Measured undamped: first retries
+    from t = 20.1 s, 77 retries, then a stop at time.min_dt at t = 22.9 s; in session 6, with
+    the inertia term assembled in the forms, from t = 12.8 s and a stop at t = 44.2 s: the
+    undamped trajectory is chaotic, round-off moves those times.)"""
     coarse = ["mesh.element_size=0.1"]
     _assert_finished_undisturbed(_default_run(3000, "exact", coarse), 3000)
-    undamped = _default_run(900, "exact", [*coarse, *UNDAMPED])
+    try:
+        undamped = _default_run(3000, "exact", [*coarse, *UNDAMPED])
+    except ConvergenceError as err:
+        assert "time.min_dt" in str(err)
+        return
     assert sum(r["retries"] for r in undamped) > 0
 
 
