@@ -209,8 +209,8 @@ class Simulation:
         what = f"step {state.step + 1} (t = {state.time + h:.6g} s)"
         if p.ipc is not None:
             self._stage_ipc(state.u, h)
-        self._initial_guess(u_pred, state.u, what)
-        stats = self.minimiser.solve(p.x_work, what=what)
+        g0 = self._initial_guess(u_pred, state.u, what)
+        stats = self.minimiser.solve(p.x_work, what=what, g0=g0)
         p.set_state(p.x_work)
         if p.ipc is not None:
             p.ipc.finish_step()
@@ -272,9 +272,10 @@ class Simulation:
         raise ConvergenceError(f"{what}: no collision-free start with every element "
                                "uninverted: reduce time.dt")
 
-    def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> None:
+    def _initial_guess(self, u_pred: np.ndarray, u_last: np.ndarray, what: str) -> float | None:
         """Start Newton where the objective is finite: the predictor, else u_n, else the
-        linearised response to the pins' motion.
+        linearised response to the pins' motion; returns g there (None: not evaluated), for
+        the minimiser to reuse.
 
         A large predicted step, or pins that move far in one step, can invert elements,
         where energies such as neo-Hookean's are undefined (+inf with the inversion
@@ -289,11 +290,11 @@ class Simulation:
         x = p.x_work
         if p.ipc is not None:
             self._collision_free_guess(u_pred, u_last, what)
-            return
+            return None
         for guess in (u_pred, u_last):
             p.load_guess(guess, x)
-            if math.isfinite(p.objective(None, x)):
-                return
+            if math.isfinite(g := p.objective(None, x)):
+                return g
         p.load_guess(u_last, x, apply_bcs=False)
         r, step = x.duplicate(), x.duplicate()
         p.residual(None, x, r)
@@ -301,11 +302,12 @@ class Simulation:
         x.axpy(-1.0, step)
         r.destroy()
         step.destroy()
-        if not math.isfinite(p.objective(None, x)):
+        if not math.isfinite(g := p.objective(None, x)):
             why = "the pins move too far in one step" if moving_pins(self.scene) else \
                 "the motion predicted over one step inverts elements or overflows"
             raise ConvergenceError(f"{what}: no start for Newton gives a finite step "
                                    f"objective ({why}): reduce time.dt")
+        return g
 
     # -- the run --------------------------------------------------------------------------
     def run(self, output_dir: Path | None = None, quiet: bool = False,

@@ -232,8 +232,9 @@ class Minimiser:
                                "or for a component this solver does not have): see "
                                "`fem-anim solvers` and PETSc's manual for the names")
 
-    def solve(self, x: PETSc.Vec, what: str = "step") -> SolveStats:
-        """Minimise from the initial guess ``x`` (overwritten with the minimiser).
+    def solve(self, x: PETSc.Vec, what: str = "step", g0: float | None = None) -> SolveStats:
+        """Minimise from the initial guess ``x`` (overwritten with the minimiser); ``g0``:
+        g(x) if the caller has just evaluated it (remembered like SNES's own evaluations).
 
         Raises:
             ConvergenceError: naming ``what``, the iteration count and the SNES/KSP reasons.
@@ -244,6 +245,8 @@ class Minimiser:
         factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
         factorisations0 = self._events[0].getPerfInfo()["count"]
         self._clear_objective_cache()
+        if g0 is not None:
+            self._g_cache.append((x.copy(), g0))
         self.hessian.start_step()
         self.reuse.start_step()
         self._polish_its = self._polish_assemblies = 0

@@ -266,6 +266,25 @@ MUTATIONS: list[Mutation] = [
              'and (damping["alpha"] > 0 or damping["beta"] > 0)', 'and damping["alpha"] > 0',
              ("tests/test_cli.py::test_default_scene_outputs",),
              "stiffness-proportional damping alone builds no term (the default scene undamped)"),
+    Mutation("constant-terms-no-lifting", "fem_anim/constant_terms.py",
+             "            fem_petsc.set_bc(z, self.bcs)  # x~", "            pass  # x~",
+             ("tests/test_constant_terms.py::test_constant_terms_equal_the_single_form",),
+             "the inertia gradient taken at x, not with the pins at their prescribed values"),
+    Mutation("constant-hessian-stale", "fem_anim/constant_terms.py",
+             "        if assembled_for != scales:", "        if assembled_for is None:",
+             ("tests/test_constant_terms.py::test_constant_terms_equal_the_single_form",),
+             "the damping Hessian kept at its first coefficient when dt changes"),
+    Mutation("lifting-always-skipped", "fem_anim/problem.py",
+             "        if not self._pins_on_target():", "        if False:",
+             ("tests/test_constant_terms.py::test_constant_terms_equal_the_single_form",),
+             "the residual's lifting skipped although the pins are off their values"),
+    Mutation("inertia-value-anchor-sign", "fem_anim/constant_terms.py",
+             "            z.axpy(-1.0, compat.petsc_vec(term.anchor))\n            Q.mult(z, Qz)\n"
+             "            total",
+             "            z.axpy(1.0, compat.petsc_vec(term.anchor))\n            Q.mult(z, Qz)\n"
+             "            total",
+             ("tests/test_reference_comparison.py::test_step_objective",),
+             "the inertia term's value taken at x + y instead of x - y"),
 ]
 
 
