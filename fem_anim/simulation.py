@@ -210,7 +210,9 @@ class Simulation:
         if p.ipc is not None:
             self._stage_ipc(state.u, h)
         g0 = self._initial_guess(u_pred, state.u, what)
-        stats = self.minimiser.solve(p.x_work, what=what, g0=g0)
+        if g0 is not None:
+            self.minimiser.seed_objective(p.x_work, g0)
+        stats = self.minimiser.solve(p.x_work, what=what)
         p.set_state(p.x_work)
         if p.ipc is not None:
             p.ipc.finish_step()

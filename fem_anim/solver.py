@@ -168,6 +168,7 @@ class Minimiser:
         snes = self.snes = PETSc.SNES().create(problem.comm)
         snes.setOptionsPrefix(prefix)
         self._g_cache: list[tuple[PETSc.Vec, float]] = []
+        self._g_seed: tuple[PETSc.Vec, float] | None = None  # seed_objective, next solve
         self.saddle = getattr(problem, "saddle_point", False)
         if not self.saddle:
             snes.setObjective(self.objective)
@@ -232,9 +233,13 @@ class Minimiser:
                                "or for a component this solver does not have): see "
                                "`fem-anim solvers` and PETSc's manual for the names")
 
-    def solve(self, x: PETSc.Vec, what: str = "step", g0: float | None = None) -> SolveStats:
-        """Minimise from the initial guess ``x`` (overwritten with the minimiser); ``g0``:
-        g(x) if the caller has just evaluated it (remembered like SNES's own evaluations).
+    def seed_objective(self, x: PETSc.Vec, value: float) -> None:
+        """g(x) just evaluated by the caller for the next :meth:`solve`'s start: remembered
+        like SNES's own evaluations (:meth:`objective`), so it is not assembled again."""
+        self._g_seed = (x.copy(), value)
+
+    def solve(self, x: PETSc.Vec, what: str = "step") -> SolveStats:
+        """Minimise from the initial guess ``x`` (overwritten with the minimiser).
 
         Raises:
             ConvergenceError: naming ``what``, the iteration count and the SNES/KSP reasons.
@@ -245,8 +250,9 @@ class Minimiser:
         factor0, solve0 = (e.getPerfInfo()["time"] for e in self._events)
         factorisations0 = self._events[0].getPerfInfo()["count"]
         self._clear_objective_cache()
-        if g0 is not None:
-            self._g_cache.append((x.copy(), g0))
+        if self._g_seed is not None:  # a point other than x is simply never matched
+            self._g_cache.append(self._g_seed)
+            self._g_seed = None
         self.hessian.start_step()
         self.reuse.start_step()
         self._polish_its = self._polish_assemblies = 0
