@@ -107,8 +107,10 @@ MUTATIONS: list[Mutation] = [
     Mutation("inertia-half", "forms/inertia.py",
              "return 0.5 * rho * ufl.inner(w, w) * dx_mass",
              "return rho * ufl.inner(w, w) * dx_mass",
-             (f"{REF}::test_step_objective[3-neohookean]",),
-             "inertia term 1/2 ||x - y||_M^2 without its 1/2"),
+             (f"{REF}::test_step_objective[3-neohookean]",
+              "tests/test_constant_terms.py::test_constant_terms_equal_the_single_form"),
+             "inertia term 1/2 ||x - y||_M^2 without its 1/2 (since the constant terms its value "
+             "comes from M; the form still makes the damped constant Hessian and y^T H y)"),
     Mutation("kinetic-half", "forms/inertia.py",
              "return 0.5 * rho * ufl.inner(v, v) * dx_mass",
              "return rho * ufl.inner(v, v) * dx_mass",
@@ -244,8 +246,10 @@ MUTATIONS: list[Mutation] = [
              "the preview overwrites the solver keys the scene gave"),
     Mutation("lifting-stale-ghosts", "fem_anim/problem.py",
              "[compat.petsc_vec(self.unknown)], -1.0)", "[x], -1.0)",
-             ("tests/test_mpi_gradient.py::test_residual_is_the_objectives_gradient_under_mpi",),
-             "the lifting reads SNES's iterate at ghost dofs (stale under MPI)"),
+             ("tests/test_mpi_gradient.py::test_residual_is_the_objectives_gradient_under_mpi",
+              "tests/test_constant_terms.py::test_constant_terms_under_mpi"),
+             "the lifting reads SNES's iterate at ghost dofs (stale under MPI; the lifting runs "
+             "only with pins off their values, which the second test sets)"),
     Mutation("truncated-cg-indefinite-pc", "fem_anim/newton_hessian.py",
              "wanted = self._pc_matrix if filtered else A", "wanted = A",
              ("tests/test_hessian_modes.py::"

@@ -7,8 +7,9 @@ value, ``ufl.derivative`` gradient lifted by the pins like DOLFINx's nonlinear p
 Hessian with the pins' identity rows), on a bar with every such term: consistent mass,
 gravity, mass- and stiffness-proportional damping, a moving pin whose dofs are off their
 prescribed values (the lifting is not zero) or on them (it is skipped), in both matrix types
-the solvers use, and again after the damping coefficient changes (adaptive dt). Run as a
-script under ``mpirun -n 2`` by the last test.
+the solvers use, and again after the damping coefficient changes (adaptive dt). The iterate
+handed to the callbacks has stale ghost entries, as SNES's do. Run as a script under
+``mpirun -n 2`` by the last test (the pin straddles the two ranks' boundary).
 """
 
 from __future__ import annotations
@@ -33,7 +34,9 @@ from fem_anim.simulation import Simulation
 PIN_VELOCITY = np.array([0.0, 0.3, 0.1])  # m/s
 SCENE = ["mesh.size=[1.0,0.1,0.1]", "mesh.element_size=0.1", "damping.alpha=0.7",
          "damping.beta=0.002", 'material.model="neohookean"', "output.render=false",
-         'pin=[{name="wall",min=[-1e-6,-1,-1],max=[1e-6,1,1],velocity=[0.0,0.3,0.1]}]']
+         # a moving pin across the middle, where two ranks' partition boundary lies (its
+         # dofs are then ghosts of a rank: the lifting must read the state's ghost values)
+         'pin=[{name="middle",min=[0.4,-1,-1],max=[0.6,1,1],velocity=[0.0,0.3,0.1]}]']
 RTOL = 1e-12
 
 
@@ -66,16 +69,21 @@ def check(comm: MPI.Comm) -> list[str]:
             if on_target:
                 fem_petsc.set_bc(x, p.bcs)
             label = f"c = {coefficient}, pins {'on' if on_target else 'off'} target"
-            # the single form, as a nonlinear problem of DOLFINx assembles it
+            # the single form, as a nonlinear problem of DOLFINx assembles it (at the state
+            # with its ghosts updated)
             p.set_state(x)
             g = p.assemble_scalar(whole["objective"])
             b_ref = fem_petsc.assemble_vector(whole["residual"])
-            fem_petsc.apply_lifting(b_ref, [whole["jacobian"]], [p.bcs], [x], -1.0)
+            fem_petsc.apply_lifting(b_ref, [whole["jacobian"]], [p.bcs],
+                                    [compat.petsc_vec(p.u)], -1.0)
             b_ref.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
             fem_petsc.set_bc(b_ref, p.bcs, x, -1.0)
             A_ref = fem_petsc.assemble_matrix(whole["jacobian"], p.bcs)
             A_ref.assemble()
-            # the callbacks
+            # the callbacks, given x with stale ghost entries as SNES leaves them (it never
+            # updates them; under MPI a callback must not read them)
+            with x.localForm() as local:
+                local.array[x.getLocalSize():] = 1.0e3
             value = p.objective(None, x)
             b = p.create_vector()
             p.residual(None, x, b)
