@@ -506,6 +506,7 @@ class EnergyProblem:
                 cells = np.flatnonzero(self.cell_body == k).astype(np.int32)
                 dofs = np.intersect1d(dofs, compat.dofs_of_cells(self.V, cells))
                 dofs = dofs.astype(np.int32)
+            dofs = self._owners_choice(dofs)
             coordinates_i = coordinates[dofs]
             owned = dofs[dofs < self.V.dofmap.index_map.size_local]
             if self.comm.allreduce(owned.size, op=MPI.SUM) == 0:
@@ -517,6 +518,22 @@ class EnergyProblem:
             if pin["velocity"] is not None or pin["angular_velocity"] != 0:
                 self.moving_pins.append(PinMotion.from_scene(pin, dofs, coordinates_i))
         return bcs
+
+    def _owners_choice(self, nodes: np.ndarray) -> np.ndarray:
+        """The pinned nodes of V as their owners chose them, ghosts included (collective).
+
+        ``locate_dofs_geometrical`` tests each rank's own dof coordinates, which DOLFINx
+        computes through each rank's cells: a vertex on a pin box's face can fall inside on
+        one rank and outside on another (round-off), and a ghost pinned on one rank but free
+        on its owner corrupts the assembly near it (seen on 3 ranks: a residual off by 2e-3).
+        The owner decides; its ghosts follow.
+        """
+        marker = fem.Function(self.V)
+        values = marker.x.array.reshape(-1, self.d)
+        owned = nodes[nodes < self.V.dofmap.index_map.size_local]
+        values[owned, 0] = 1.0
+        marker.x.scatter_forward()
+        return np.flatnonzero(values[:, 0] == 1.0).astype(np.int32)
 
     def set_pinned_displacement(self, t: float) -> None:
         """Move the animated pins to their prescribed displacement at time ``t``."""

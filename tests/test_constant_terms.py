@@ -9,7 +9,9 @@ gravity, mass- and stiffness-proportional damping, a moving pin whose dofs are o
 prescribed values (the lifting is not zero) or on them (it is skipped), in both matrix types
 the solvers use, and again after the damping coefficient changes (adaptive dt). The iterate
 handed to the callbacks has stale ghost entries, as SNES's do. Run as a script under
-``mpirun -n 2`` by the last test (the pin straddles the two ranks' boundary).
+``mpirun -n 3`` by the last test (the pin straddles the ranks' boundaries; on 3 ranks a
+vertex on the pin box's face was pinned on one rank and free on its owner until the owner's
+choice was made the rule: ``EnergyProblem._owners_choice``).
 """
 
 from __future__ import annotations
@@ -113,8 +115,8 @@ def test_constant_terms_equal_the_single_form():
 
 @pytest.mark.mpi
 def test_constant_terms_under_mpi(tmp_path):
-    """The same on two ranks: ghosts, the pins' owners, the collective dot products."""
-    mpirun = mpirun_command(2)
+    """The same on three ranks: ghosts, the pins' owners, the collective dot products."""
+    mpirun = mpirun_command(3)
     if mpirun is None:
         pytest.skip("mpirun not available")
     proc = subprocess.run([*mpirun, sys.executable, str(Path(__file__))], cwd=tmp_path,
