@@ -138,15 +138,6 @@ class ConstantTerms:
             PETSc.Mat.Structure.SAME_NONZERO_PATTERN
         A.axpy(1.0, H, structure)
 
-    def destroy(self) -> None:
-        for Q in self.matrices:
-            Q.destroy()
-        for H, _ in self._hessians.values():
-            H.destroy()
-        for v in (self.gradient, self._z, self._Qz):
-            if v is not None:
-                v.destroy()
-
 
 def _mat_type(petsc_type: str) -> str | None:
     """DOLFINx's ``mat_type`` for a PETSc matrix type (``seqbaij`` -> ``baij``)."""

@@ -564,6 +564,8 @@ class Minimiser:
 
     def destroy(self) -> None:
         self._clear_objective_cache()
+        if self._g_seed is not None:  # seeded, never solved
+            self._g_seed[0].destroy()
         self.hessian.destroy()
         self.reuse.destroy()
         self.snes.destroy()
