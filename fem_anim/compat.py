@@ -14,6 +14,8 @@ between them is wrapped here, in the package and in the tests alike
 ``ufl.Mesh(ufl.VectorElement(...))``        ``basix.ufl.element("Lagrange", cell, 1, shape)``
 ``ufl.MixedElement([...])``                 ``basix.ufl.mixed_element([...])``
 ``PC.SchurPreType``                         ``PC.FieldSplitSchurPreType`` (petsc4py)
+``KSP...CONVERGED_CG_NEG_CURVE`` (5),        ``CONVERGED_NEG_CURVE`` (5),
+``CONVERGED_CG_CONSTRAINED`` (6)            ``CONVERGED_STEP_LENGTH`` (6) (petsc4py)
 ``u.vector``                                ``u.x.petsc_vec``
 ``geometry.dofmap`` / ``dofmap.list``       2D arrays (0.5: adjacency lists)
 ``geometry.BoundingBoxTree(mesh, d)``       ``geometry.bb_tree(mesh, d)``
@@ -60,6 +62,7 @@ __all__ = [
     "mixed_space",
     "collapse_subspace",
     "set_schur_user_matrix",
+    "trust_region_boundary_reasons",
     "quadrature_space",
     "petsc_vec",
     "geometry_dofmap",
@@ -127,6 +130,19 @@ def set_schur_user_matrix(pc, S) -> None:
 
     kinds = getattr(PETSc.PC, "FieldSplitSchurPreType", None) or PETSc.PC.SchurPreType
     pc.setFieldSplitSchurPreType(kinds.USER, S)
+
+
+def trust_region_boundary_reasons() -> tuple[int, int]:
+    """The KSP reasons of a trust-region CG (KSPSTCG) that stopped on the region's boundary:
+    negative curvature followed to it, and CG's iterate leaving it. petsc4py 3.18 names them
+    ``CONVERGED_CG_NEG_CURVE`` and ``CONVERGED_CG_CONSTRAINED`` (its ``CONVERGED_STEP_LENGTH``
+    is 7, another reason), 3.22 ``CONVERGED_NEG_CURVE`` and ``CONVERGED_STEP_LENGTH``."""
+    from petsc4py import PETSc
+
+    R = PETSc.KSP.ConvergedReason
+    if hasattr(R, "CONVERGED_CG_NEG_CURVE"):
+        return R.CONVERGED_CG_NEG_CURVE, R.CONVERGED_CG_CONSTRAINED
+    return R.CONVERGED_NEG_CURVE, R.CONVERGED_STEP_LENGTH
 
 
 def cell_space(mesh) -> fem.FunctionSpace:

@@ -54,7 +54,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FILTERS", "MODES", "ShiftStrategy", "abs_psd", "filter_tangent", "model_ratio",
-           "positive_definite", "project_psd", "trust_region_choice", "RHO_TOLERANCE"]
+           "positive_definite", "project_psd", "trust_radius", "trust_region_choice",
+           "RHO_TOLERANCE"]
 
 #: ``solver.hessian`` values.
 MODES = ("exact", "shift", "project", "abs", "trust_region_filter", "auto")
@@ -197,6 +198,32 @@ def trust_region_choice(rho: float | None) -> str:
     if rho is not None and abs(rho - 1.0) < RHO_TOLERANCE:
         return "clamp"
     return "abs"
+
+
+def trust_radius(radius: float, rho: float, alpha: float, length: float) -> float:
+    """The trust radius after a step alpha y (``length`` = ||y||) whose actual decrease of g
+    was rho times the exact quadratic model's (Nocedal & Wright, Algorithm 4.1, with the
+    line search of a line-search Newton inside: the step may be shorter than the direction).
+
+    * rho < 1/4: the model was poor: a quarter of the step taken;
+    * the line search shortened a direction whose model then held (rho > 3/4): half the
+      direction (its full length failed the sufficient-decrease test; PETSc's backtracking
+      cuts lambda to 0.1 at once, which would under-rate the model's reach tenfold);
+      otherwise the step taken;
+    * a full step to the boundary (||y|| >= 0.99 radius) with rho > 3/4: twice the radius,
+      four times when the model was exact to 10 % (|rho - 1| < 0.1);
+    * else unchanged. A NaN rho (no predicted decrease) leaves the radius unchanged.
+    """
+    taken = abs(alpha) * length
+    if not np.isfinite(rho):
+        return radius
+    if rho < 0.25:
+        return 0.25 * taken
+    if alpha < 1.0 - 1e-12:
+        return 0.5 * length if rho > 0.75 else taken
+    if rho > 0.75 and length >= 0.99 * radius:
+        return radius * (4.0 if abs(rho - 1.0) < 0.1 else 2.0)
+    return radius
 
 
 @dataclass

@@ -16,10 +16,11 @@ trust-region ratio) are in :mod:`fem_anim.hessian`; this module is the state a
   (``DIVERGED_INDEFINITE_MAT``) leaves its last iterate, a descent direction, and SNES takes
   it (``SNESSetMaxLinearSolveFailures``); an ascent direction (negative curvature at CG's
   first direction) is replaced by the abs-filtered Newton direction; once a step has shown CG
-  indefiniteness, CG is preconditioned by the abs-filtered Hessian (positive definite) for the
-  rest of the step; only when a direction fails too (zero after a first negative curvature, or the
-  line search fails) does :meth:`HessianChoice.restart` continue the step filtered from its
-  last iterate.
+  indefiniteness, the rest of the step is Newton-CG in a trust region (KSPSTCG, which follows
+  negative curvature to the region's boundary; the radius follows the exact model's ratio
+  rho), preconditioned by shifted incomplete Cholesky of A (positive definite); only when a
+  direction fails too (zero after a first negative curvature, or the line search fails) does
+  :meth:`HessianChoice.restart` continue the step filtered from its last iterate.
 
 Each step's iterations are counted per kind of Hessian (:data:`HESSIAN_KINDS`).
 """
@@ -30,8 +31,9 @@ from collections import Counter
 
 from petsc4py import PETSc
 
+from . import ksp_trust_region
 from .errors import ConvergenceError
-from .hessian import ShiftStrategy, model_ratio, trust_region_choice
+from .hessian import ShiftStrategy, model_ratio, trust_radius, trust_region_choice
 
 __all__ = ["HessianChoice", "HESSIAN_KINDS", "MAX_AUTO_RESTARTS", "cg_probe"]
 
@@ -95,11 +97,14 @@ class HessianChoice:
         self._inertia = True  # whether the factorisation reports its inertia (auto)
         self._truncated = None  # auto: whether CG's truncated iterates are taken (first use)
         self._indefinite_seen = False  # auto with CG: CG met indefiniteness in this step
-        self._pc_matrix = None  # auto with CG: the abs-filtered Hessian CG is preconditioned by
-        self._pc_current = False  # ... assembled in this step (kept for its remaining iterations)
-        self.filtered_preconditioners = 0  # iterations preconditioned by it (the whole run)
+        self._pc_matrix = None  # auto with CG: the AIJ matrix CG is preconditioned by
+        self.aij_preconditioners = 0  # iterations preconditioned by it (the whole run)
         self.descent_solves = 0  # ascent directions of CG replaced (the whole run)
         self._extra_linear_its = 0  # CG iterations of those replacements, this SNES solve
+        self._radius = None  # auto with CG: the trust radius once the step met indefiniteness
+        self._longest = 0.0  # ... the longest Newton direction of the step so far (its start)
+        self._step_taken = None  # (alpha, ||y||) of the step the last model ratio judged
+        self.trust_region_its = 0  # iterations solved by KSPSTCG in a trust region (the run)
 
     def start_step(self) -> None:
         """Forget the previous step: counts, model, auto's state."""
@@ -107,7 +112,10 @@ class HessianChoice:
         self.drop_model()
         self._filtered = self._no_exact = False
         self.restarts = self.truncated = 0
-        self._indefinite_seen = self._pc_current = False
+        self._indefinite_seen = False
+        self.leave_trust_region()
+        self._radius = None
+        self._longest = 0.0
 
     def solved(self) -> int:
         """After each SNES solve: count the truncated CG directions it took (``auto``);
@@ -140,9 +148,10 @@ class HessianChoice:
         return True
 
     def end_step(self) -> None:
-        """``auto``: the next step starts exact."""
+        """``auto``: the next step starts exact, with plain CG."""
         if self.mode == "auto":
             self.problem.set_hessian_filter(None)
+            self.leave_trust_region()
 
     def counts(self) -> dict[str, int]:
         """This step's Newton iterations per kind of Hessian."""
@@ -155,13 +164,17 @@ class HessianChoice:
         the filtered Hessian: g(x), r.y and y^T H y with H unprojected
         (:meth:`fem_anim.problem.EnergyProblem.curvature`).
         """
-        if not (self.mode == "trust_region_filter" or
+        if self._truncated:
+            self._longest = max(self._longest, y.norm())
+        if not (self.mode == "trust_region_filter" or self._radius is not None or
                 (self.mode == "auto" and self._filtered)):
             self.drop_model()
             return
         g = self._objective(self.snes, x)
         slope = self.problem_residual.dot(y)
-        curvature = self.problem.curvature(x, y)
+        curvature = self._stcg_curvature(y, slope) if self._radius is not None else None
+        if curvature is None:
+            curvature = self.problem.curvature(x, y)
         if self._model is None:
             self._model = [x.copy(), y.copy(), g, slope, curvature]
         else:
@@ -187,6 +200,7 @@ class HessianChoice:
         alpha = -p.dot(y) / yy if yy > 0.0 else 0.0
         p.destroy()
         self.drop_model()
+        self._step_taken = (alpha, yy ** 0.5)
         return model_ratio(g_k - self._objective(self.snes, x), slope, curvature, alpha)
 
     def jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
@@ -255,6 +269,8 @@ class HessianChoice:
             problem.jacobian(snes, x, A, P)
         if self._truncated:
             self._precondition(snes, x, A, how, self._cg_saw_indefinite(snes))
+            if how is not None or self._indefinite_seen:
+                self._trust_region(rho)
         self.its[how or "exact"] += 1
 
     def _cg_saw_indefinite(self, snes) -> bool:
@@ -269,36 +285,81 @@ class HessianChoice:
     def _precondition(self, snes, x: PETSc.Vec, A: PETSc.Mat, how: str | None,
                       seen: bool) -> None:
         """``auto`` with CG: precondition by A itself or, once this step has shown CG an
-        indefinite matrix or preconditioner (``seen``), by the abs-filtered Hessian, while CG
-        still runs on the exact Hessian A; a filtered A (``how``) preconditions itself.
+        indefinite matrix or preconditioner (``seen``) or A is filtered (``how``), by
+        incomplete Cholesky of an AIJ copy of A, which PETSc shifts to positive definite.
 
-        Truncated Newton-CG needs a symmetric positive definite preconditioner (Nocedal &
-        Wright, Algorithm 7.1; Steihaug 1983): ICC(0) of an indefinite Hessian is none, and
-        CG then stops after 2-3 iterations at ``DIVERGED_INDEFINITE_PC`` with a poor
-        direction. The abs-filtered Hessian M + w K_|.| is positive definite, so CG stops
-        only at true negative curvature of A, and runs to convergence (a Newton step) where
-        A is positive definite. The preconditioning matrix is stored as AIJ whatever A's
-        storage: PETSc's ICC of a 3 x 3-block (BAIJ) matrix applies no positive-definite
-        shift and reported ``DIVERGED_INDEFINITE_PC`` on the (positive definite) filtered
-        Hessian of the crushed cube. The filtered preconditioner is assembled once per step
-        (at the step's first indefiniteness) and kept, with its ICC factor, for the step's
-        remaining iterations: a preconditioner need not be current. Assembling it every
-        iteration (the per-point eigenvalue filter and an AIJ assembly) made the undamped
-        ~55k beam's auto run 1.5x slower than exact's (166.5 s against 108.7 s of stepping,
-        side by side) for the same 360 iterations that once per step takes in 89 s.
+        Newton-CG in a trust region (:meth:`_trust_region`) needs a symmetric positive
+        definite preconditioner (Nocedal & Wright, Algorithm 7.1; Steihaug 1983). PETSc's
+        ICC of a 3 x 3-block (BAIJ) matrix applies no shift: on an indefinite Hessian CG
+        stops after 2-3 iterations at ``DIVERGED_INDEFINITE_PC``, which is how a step first
+        shows its indefiniteness. ICC of AIJ storage applies the Manteuffel shift
+        (``POSITIVE_DEFINITE``, the default in PETSc 3.18 and 3.22): its factor L D L^T has
+        D > 0, so the preconditioner is positive definite whatever A is, and CG still runs
+        on the exact A. The copy (``MatConvert`` into a kept AIJ matrix) is made every
+        iteration: a current preconditioner. Measured on frames 46-60 of the undamped ~55k
+        beam (trust region on; one run each, load ~2): 6741 CG iterations and 24.0 s of
+        stepping, against 8315 and 29.5 s when the preconditioner was the abs-filtered
+        Hessian assembled once per step (an eigendecomposition per quadrature point, 0.43 s
+        a step on 55k points, and a factor that grows stale within the step) and 15556 and
+        33.6 s when that filtered Hessian was kept across steps.
         """
         J, current, (callback, args, kargs) = snes.getJacobian()
         filtered = how is not None or seen
-        if how is not None:
+        if filtered:
             A.convert("aij", self._aij_matrix())
-            self._pc_current = False
-        elif seen and not self._pc_current:  # once per step: a preconditioner need not be
-            self._assemble_abs(snes, x)        # current, and its ICC factor is kept with it
-            self._pc_current = True
-            self.filtered_preconditioners += 1
+            self.aij_preconditioners += 1
         wanted = self._pc_matrix if filtered else A
         if current.handle != wanted.handle:  # SNES passes (J, P) to the KSP after this call
             snes.setJacobian(callback, J, wanted, *(args or ()), **(kargs or {}))
+
+    def _trust_region(self, rho: float | None) -> None:
+        """``auto`` with CG, once the step has met an indefinite Hessian: Newton-CG in a trust
+        region (Steihaug 1983; Nocedal & Wright, Algorithms 4.1 and 7.2), by KSPSTCG.
+
+        Truncated CG stops *before* a direction of negative curvature and hands the line
+        search a Newton direction of the positive-curvature part: near a saddle of g such
+        directions overshoot (the ~55k beam's frame 46: 12 of its 33 iterations took the
+        backtracking's floor lambda = 0.1, 4 of them from CG's converged direction on an
+        indefinite Hessian). KSPSTCG follows negative curvature to the boundary of a trust
+        region ||d|| <= Delta (Euclidean in PETSc 3.18 and 3.22) and stops there when CG's
+        iterate leaves it, so the direction's length is the model's reach rather than the
+        Newton step's. Delta starts at the length of the step's longest Newton direction so
+        far (its first, from the initial guess: the scale of the step's motion; a step bound
+        or the line search cuts it at once) and then follows
+        :func:`fem_anim.hessian.trust_radius` (rho of the exact model, whose curvature
+        y^T A y comes from KSPSTCG's model value: no assembly). The line search on g still
+        decides the step's length, and the stopping test is unchanged. The preconditioner
+        is positive definite, as KSPSTCG requires (:meth:`_precondition`).
+        """
+        ksp = self.snes.getKSP()
+        if self._radius is None:
+            self._radius = self._longest if self._longest > 0.0 else 1.0
+        elif rho is not None and self._step_taken is not None:
+            self._radius = trust_radius(self._radius, rho, *self._step_taken)
+        self._step_taken = None
+        if ksp.getType() != "stcg":
+            ksp.setType("stcg")
+        ksp_trust_region.set_radius(ksp, self._radius)
+        self.trust_region_its += 1
+
+    def _stcg_curvature(self, y: PETSc.Vec, slope: float) -> float | None:
+        """y^T A y of the direction y (KSPSTCG's d, perhaps scaled since) from the solve's
+        model value m(d) = 1/2 d^T A d - r . d: no assembly. None if the last solve was
+        not KSPSTCG's or its direction was zero."""
+        ksp = self.snes.getKSP()
+        if ksp.getType() != "stcg":
+            return None
+        norm_d = ksp_trust_region.direction_norm(ksp)
+        if not norm_d > 0.0:
+            return None
+        t = y.norm() / norm_d  # y = t d (a step bound may have scaled it)
+        return 2.0 * t * t * (ksp_trust_region.model_value(ksp) + slope / t)
+
+    def leave_trust_region(self) -> None:
+        """Plain CG again (the step ended, or a full Newton step is wanted)."""
+        ksp = self.snes.getKSP()
+        if ksp.getType() == "stcg":
+            ksp.setType("cg")
 
     def _aij_matrix(self) -> PETSc.Mat:
         """The AIJ preconditioning matrix (made at its first use)."""
@@ -330,7 +391,7 @@ class HessianChoice:
         if not self._truncated or ksp.getConvergedReason() >= 0 or r.dot(y) > 0.0:
             return False
         self._assemble_abs(self.snes, x)
-        self._indefinite_seen = self._pc_current = True
+        self._indefinite_seen = True
         ksp.setOperators(self._pc_matrix, self._pc_matrix)  # SNES sets its own again next
         y.zeroEntries()
         ksp.solve(r, y)

@@ -474,6 +474,7 @@ class Minimiser:
         converged as double precision allows. Uses the factorisation of the last Jacobian.
         """
         g = self.objective(self.snes, x)
+        self.hessian.leave_trust_region()  # the full Newton step's decrement
         r, step = self.b.duplicate(), self.b.duplicate()
         self.problem.residual(self.snes, x, r)
         decrement = self.newton_step(x, r, step, assemble_hessian=False)

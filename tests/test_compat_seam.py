@@ -45,6 +45,8 @@ FORBIDDEN = {
     r"\bNonlinearProblem\b": "fem_anim's own SNES (0.10 wraps SNES in NonlinearProblem)",
     r"(?<!compat)\.create_mesh\s*\(": "compat.create_mesh",
     r"\blocate_dofs_topological\b": "compat.dofs_of_cells (0.9 needs cell-cell connectivity)",
+    r"\bCONVERGED_(CG_)?(NEG_CURVE|CG_CONSTRAINED|STEP_LENGTH)\b":
+        "compat.trust_region_boundary_reasons() (petsc4py 3.18 and 3.22 name them apart)",
 }
 
 

@@ -14,9 +14,11 @@ import numpy as np
 import pytest
 from conftest import clean_environment, fem_anim_command, mpirun_command
 from mpi4py import MPI
+from petsc4py import PETSc
 from test_cli import read_stats
 from test_solver_menu import run_steps, squash
 
+from fem_anim import compat
 from fem_anim.errors import ConvergenceError
 from fem_anim.newton_hessian import cg_probe
 from fem_anim.scene import load_scene
@@ -87,7 +89,7 @@ def test_auto_with_cg_takes_truncated_newton_directions(tmp_path):
         assert stats.reason > 0
         truncated.append(sim.minimiser.hessian.truncated)
         if step == 0:  # measured: 7 iterations, one of them truncated
-            assert _kinds(stats) == {"exact": stats.newton_its}
+            assert set(_kinds(stats)) == {"exact"}
     assert truncated[0] >= 1, truncated
     press = state.u.reshape(-1, 3)[sim.problem.moving_pins[0].dofs, 2]
     assert press == pytest.approx(-0.17)
@@ -136,28 +138,95 @@ def test_auto_with_cg_replaces_an_ascent_direction(tmp_path):
 
 
 def test_auto_with_cg_preconditions_by_a_positive_definite_matrix(tmp_path):
-    """After CG has met indefiniteness in a step, auto preconditions CG by the abs-filtered
-    Hessian (not by ICC(0) of the indefinite one) while CG still runs on the exact Hessian:
-    the two operators differ, the preconditioning matrix is positive definite (a CG probe
-    meets no negative curvature), and the next step starts from A alone again."""
+    """After CG has met indefiniteness in a step, auto runs KSPSTCG on the exact Hessian A
+    preconditioned by incomplete Cholesky of an AIJ copy of A (PETSc shifts it positive
+    definite), not by ICC(0) of A's 3 x 3 blocks (no shift: DIVERGED_INDEFINITE_PC, which
+    is how the step showed its indefiniteness): at every such solve the copy holds A's
+    values and r^T M^-1 r > 0 for random r; the next step starts from A alone again, with
+    plain CG."""
     sim = squash(tmp_path, hessian="auto", element_size=0.1, solver='preset = "cg-icc"')
-    choice, ksp = sim.minimiser.hessian, sim.minimiser.snes.getKSP()
+    choice, ksp, A = sim.minimiser.hessian, sim.minimiser.snes.getKSP(), sim.minimiser.A
+    solves = []  # (A, P, KSP type) at the start of every linear solve
+    checks = []  # per KSPSTCG solve: |A z - P z| / |A z|, min r^T M^-1 r
+    z, w, v = (A.createVecs()[0] for _ in range(3))
+
+    def monitor(k, its, rnorm):
+        if its != 0:
+            return
+        a, p = k.getOperators()
+        solves.append((a.handle, p.handle, k.getType()))
+        if k.getType() == "stcg":
+            z.setRandom()
+            a.mult(z, w)
+            p.mult(z, v)
+            v.axpy(-1.0, w)
+            applied = []
+            for _ in range(3):
+                z.setRandom()
+                k.getPC().apply(z, w)
+                applied.append(z.dot(w))
+            checks.append((v.norm() / w.norm(), min(applied)))
+
+    ksp.setMonitor(monitor)
     state, stats = sim.step(sim.initial_state(), 0.05)
-    assert stats.reason > 0 and choice.filtered_preconditioners >= 1
-    A, P = ksp.getOperators()
-    assert P.handle != A.handle and P.handle == choice._pc_matrix.handle
-    # unpreconditioned CG converges: no DIVERGED_INDEFINITE_MAT on the SPD matrix
-    assert cg_probe(P, pc_type="none", rtol=1e-10, max_it=5000) > 0
-    assert not P.equal(A)  # filtered where the tangent is indefinite
-    assert _kinds(stats) == {"exact": stats.newton_its}  # the Newton matrix stays exact
+    assert stats.reason > 0 and choice.aij_preconditioners >= 1
+    P = choice._pc_matrix
+    assert A.getType() == "seqbaij" and P.getType() == "seqaij"
+    # Newton directions in the trust region (a plain CG solve with the last operators may
+    # follow: the full Newton step of the objective's round-off check)
+    assert all(a == A.handle and p == P.handle for a, p, t in solves if t == "stcg")
+    assert checks and all(diff < 1e-13 and applied > 0.0 for diff, applied in checks)
+    assert set(_kinds(stats)) == {"exact"}  # the Newton matrix stays exact
     plain = []  # steps that met no indefiniteness (measured: steps 3 and 4) use A alone
     for _ in range(3):
-        before = choice.filtered_preconditioners
+        before = choice.aij_preconditioners
+        solves.clear()
         state, stats = sim.step(state, 0.05)
         assert stats.reason > 0
-        if choice.filtered_preconditioners == before:
-            plain.append(ksp.getOperators()[1].handle == A.handle)
+        if choice.aij_preconditioners == before:
+            plain.append(solves and all(a == p == A.handle and t == "cg" for a, p, t in solves))
+    ksp.cancelMonitor()
     assert plain and all(plain)
+
+
+def test_auto_with_cg_steps_in_a_trust_region(tmp_path):
+    """The coarse crushed StVK cube with cg-icc, 4 steps: once CG has met indefiniteness,
+    each Newton direction is KSPSTCG's within the trust radius of that iteration, some end on
+    its boundary (negative curvature followed, or CG's iterate leaving the region), the
+    radius changes with the model's ratio rho, and every step meets the unchanged stopping
+    test. The model's curvature y^T A y that rho uses, read off KSPSTCG's model value, equals
+    the assembled y^T H y. (Measured, 4 steps: 29 Newton / 277 CG iterations, without the
+    trust region 29 / 294; on frames 46-60 of the undamped ~55k beam 203 / 6741 against
+    197 / 8155, 25.3 s against 28.3 s.)"""
+    from fem_anim import ksp_trust_region
+
+    sim = squash(tmp_path, hessian="auto", element_size=0.1, solver='preset = "cg-icc"')
+    choice, ksp = sim.minimiser.hessian, sim.minimiser.snes.getKSP()
+    solves, curvatures = [], []
+    record = choice.record_model
+
+    def spy(x, y):
+        if ksp.getType() == "stcg":
+            solves.append((choice._radius, ksp_trust_region.direction_norm(ksp),
+                           ksp.getConvergedReason()))
+            slope = sim.minimiser.b.dot(y)
+            curvatures.append((choice._stcg_curvature(y, slope), sim.problem.curvature(x, y)))
+        record(x, y)
+
+    choice.record_model = spy
+    state = sim.initial_state()
+    for _ in range(4):
+        state, stats = sim.step(state, 0.05)
+        assert stats.reason > 0
+    press = state.u.reshape(-1, 3)[sim.problem.moving_pins[0].dofs, 2]
+    assert press == pytest.approx(-0.17)
+    assert len(solves) == choice.trust_region_its > 0
+    assert all(norm <= radius * (1.0 + 1e-10) for radius, norm, _ in solves)
+    boundary = compat.trust_region_boundary_reasons()
+    assert any(reason in boundary for _, _, reason in solves)
+    assert len({radius for radius, _, _ in solves}) > 2
+    for from_model, assembled in curvatures:
+        assert from_model == pytest.approx(assembled, rel=1e-8, abs=1e-14)
 
 
 @pytest.mark.parametrize("hessian", ["abs", "trust_region_filter"])
@@ -350,3 +419,35 @@ def test_mpi_equals_serial(tmp_path, hessian):
         assert all(r["exact_its"] == r["newton_its"] for r in a + b)
     else:
         assert sum(r["abs_its"] for r in a) > 0 and sum(r["clamp_its"] for r in a) > 0
+
+
+@pytest.mark.mpi
+def test_trust_region_under_mpi():
+    """``tests/mpi_trust_region_check.py``: the crushed StVK cube with cg-icc and auto on 2
+    ranks (block-Jacobi ICC of the AIJ copy; the radius and KSPSTCG's model value are the
+    same on every rank) takes trust-region iterations on both ranks, converges every step,
+    crushes the cube to its press, and reaches the serial run's energies (measured: to
+    1e-14: the same minimisers)."""
+    import json
+    import sys
+
+    from conftest import ROOT
+
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    script = str(ROOT / "tests" / "mpi_trust_region_check.py")
+    out = {}
+    for ranks, prefix in ((1, []), (2, mpirun)):
+        r = subprocess.run([*prefix, sys.executable, script], capture_output=True, text=True,
+                           timeout=600, env=clean_environment(), cwd=ROOT)
+        assert r.returncode == 0, r.stdout + r.stderr
+        out[ranks] = json.loads(r.stdout.strip().splitlines()[-1])
+    serial, parallel = out[1], out[2]
+    assert parallel["ranks"] == 2 and parallel["trust_region_its"] > 0
+    for run in (serial, parallel):
+        assert all(reason > 0 for reason in run["reasons"])
+        assert run["press"] and all(h == pytest.approx(-0.17) for h in run["press"])
+    for a, b in zip(serial["energies"], parallel["energies"], strict=True):
+        for key in ("kinetic", "elastic"):
+            assert b[key] == pytest.approx(a[key], rel=1e-8), key

@@ -1,0 +1,60 @@
+"""The trust-region controls of PETSc's KSPSTCG, which petsc4py does not wrap.
+
+``KSPCGSetRadius``, ``KSPCGGetNormD`` and ``KSPCGGetObjFcn`` exist under these names in
+PETSc 3.18 and 3.22 (Debian 12 and 13) but not in their petsc4py: they are called in the
+PETSc library petsc4py loaded, through ctypes, with the KSP's handle. The radius bounds the
+step in the norm of the preconditioner (||d||_M = sqrt(d^T M d) where the preconditioner
+applies M^-1: both versions' KSPSTCG use that norm and have no setter for another).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+
+from petsc4py import PETSc
+
+__all__ = ["set_radius", "direction_norm", "model_value"]
+
+
+@functools.lru_cache(maxsize=1)
+def _library() -> ctypes.CDLL:
+    """The PETSc shared library this process has loaded (through petsc4py)."""
+    with open("/proc/self/maps", encoding="ascii", errors="replace") as maps:
+        paths = {line.split()[-1] for line in maps
+                 if "libpetsc" in line and ".so" in line.split()[-1]}
+    for path in sorted(paths):
+        library = ctypes.CDLL(path)
+        if hasattr(library, "KSPCGSetRadius"):
+            library.KSPCGSetRadius.argtypes = [ctypes.c_void_p, ctypes.c_double]
+            for name in ("KSPCGGetNormD", "KSPCGGetObjFcn"):
+                getattr(library, name).argtypes = [ctypes.c_void_p,
+                                                   ctypes.POINTER(ctypes.c_double)]
+            return library
+    raise RuntimeError("the PETSc library petsc4py loaded was not found in /proc/self/maps")
+
+
+def _check(code: int) -> None:
+    if code != 0:
+        raise PETSc.Error(code)
+
+
+def set_radius(ksp: PETSc.KSP, radius: float) -> None:
+    """The trust-region radius of a KSPSTCG (logically collective: the same on all ranks)."""
+    _check(_library().KSPCGSetRadius(ctypes.c_void_p(ksp.handle), float(radius)))
+
+
+def _get(name: str, ksp: PETSc.KSP) -> float:
+    value = ctypes.c_double()
+    _check(getattr(_library(), name)(ctypes.c_void_p(ksp.handle), ctypes.byref(value)))
+    return value.value
+
+
+def direction_norm(ksp: PETSc.KSP) -> float:
+    """||d||_M of the last solve's direction d."""
+    return _get("KSPCGGetNormD", ksp)
+
+
+def model_value(ksp: PETSc.KSP) -> float:
+    """The last solve's quadratic model at its direction: 1/2 d^T A d - b^T d."""
+    return _get("KSPCGGetObjFcn", ksp)
