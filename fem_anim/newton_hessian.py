@@ -98,6 +98,7 @@ class HessianChoice:
         self._truncated = None  # auto: whether CG's truncated iterates are taken (first use)
         self._indefinite_seen = False  # auto with CG: CG met indefiniteness in this step
         self._pc_matrix = None  # auto with CG: the AIJ matrix CG is preconditioned by
+        self._abs_matrix = None  # ... the abs-filtered Hessian of descent_direction
         self.aij_preconditioners = 0  # iterations preconditioned by it (the whole run)
         self.descent_solves = 0  # ascent directions of CG replaced (the whole run)
         self._extra_linear_its = 0  # CG iterations of those replacements, this SNES solve
@@ -362,17 +363,22 @@ class HessianChoice:
             ksp.setType("cg")
 
     def _aij_matrix(self) -> PETSc.Mat:
-        """The AIJ preconditioning matrix (made at its first use)."""
+        """The AIJ preconditioning matrix (made at its first use), the target of
+        ``MatConvert``: assembling into it is not safe (on several ranks the converted
+        matrix keeps only the nonzeros it was converted from: a form's new nonzero is an
+        error, measured on the 55k beam on 2 ranks)."""
         if self._pc_matrix is None:
             self._pc_matrix = self.problem.create_matrix("aij")
         return self._pc_matrix
 
-    def _assemble_abs(self, snes, x: PETSc.Vec) -> None:
-        """The abs-filtered Hessian at x into the AIJ preconditioning matrix."""
-        P = self._aij_matrix()
+    def _assemble_abs(self, snes, x: PETSc.Vec) -> PETSc.Mat:
+        """The abs-filtered Hessian at x, assembled into a matrix of its own."""
+        if self._abs_matrix is None:
+            self._abs_matrix = self.problem.create_matrix("aij")
         self.problem.set_hessian_filter("abs")
-        self.problem.jacobian(snes, x, P, P)
+        self.problem.jacobian(snes, x, self._abs_matrix, self._abs_matrix)
         self.problem.set_hessian_filter(None)
+        return self._abs_matrix
 
     def descent_direction(self, x: PETSc.Vec, y: PETSc.Vec, r: PETSc.Vec) -> bool:
         """``auto`` with CG: replace an ascent direction y of a failed CG solve by the
@@ -390,9 +396,9 @@ class HessianChoice:
         ksp = self.snes.getKSP()
         if not self._truncated or ksp.getConvergedReason() >= 0 or r.dot(y) > 0.0:
             return False
-        self._assemble_abs(self.snes, x)
+        M = self._assemble_abs(self.snes, x)
         self._indefinite_seen = True
-        ksp.setOperators(self._pc_matrix, self._pc_matrix)  # SNES sets its own again next
+        ksp.setOperators(M, M)  # SNES sets its own again next
         y.zeroEntries()
         ksp.solve(r, y)
         self._extra_linear_its += ksp.getIterationNumber()
@@ -475,8 +481,9 @@ class HessianChoice:
         return cg_probe(A) != PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
 
     def destroy(self) -> None:
-        if self._pc_matrix is not None:
-            self._pc_matrix.destroy()
+        for matrix in (self._pc_matrix, self._abs_matrix):
+            if matrix is not None:
+                matrix.destroy()
         if self._last_iterate is not None:
             self._last_iterate.destroy()
         self.drop_model()
