@@ -275,6 +275,12 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_hessian_modes.py::"
               "test_auto_with_cg_preconditions_by_a_positive_definite_matrix",),
              "the AIJ copy of A that preconditions CG is made once and never refreshed"),
+    Mutation("abs-into-converted-matrix", "fem_anim/newton_hessian.py",
+             "self.problem.jacobian(snes, x, self._abs_matrix, self._abs_matrix)",
+             "self.problem.jacobian(snes, x, self._aij_matrix(), self._aij_matrix())",
+             ("tests/test_hessian_modes.py::test_trust_region_under_mpi",),
+             "the abs-filtered Hessian assembled into the MatConvert target (new nonzeros: a "
+             "PETSc error on 2 ranks)"),
     Mutation("cg-ascent-direction-kept", "fem_anim/newton_hessian.py",
              "or r.dot(y) > 0.0:", "or r.dot(y) > -1e300:",
              ("tests/test_hessian_modes.py::test_auto_with_cg_replaces_an_ascent_direction",),

@@ -445,6 +445,7 @@ def test_trust_region_under_mpi():
         out[ranks] = json.loads(r.stdout.strip().splitlines()[-1])
     serial, parallel = out[1], out[2]
     assert parallel["ranks"] == 2 and parallel["trust_region_its"] > 0
+    assert parallel["abs_norm"] == pytest.approx(serial["abs_norm"], rel=1e-10)
     for run in (serial, parallel):
         assert all(reason > 0 for reason in run["reasons"])
         assert run["press"] and all(h == pytest.approx(-0.17) for h in run["press"])
