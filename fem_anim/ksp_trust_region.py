@@ -3,8 +3,9 @@
 ``KSPCGSetRadius``, ``KSPCGGetNormD`` and ``KSPCGGetObjFcn`` exist under these names in
 PETSc 3.18 and 3.22 (Debian 12 and 13) but not in their petsc4py: they are called in the
 PETSc library petsc4py loaded, through ctypes, with the KSP's handle. The radius bounds the
-step in the norm of the preconditioner (||d||_M = sqrt(d^T M d) where the preconditioner
-applies M^-1: both versions' KSPSTCG use that norm and have no setter for another).
+Euclidean norm ||d||_2 of the direction in both versions (measured by
+tests/test_ksp_trust_region.py; later releases add ``KSPCGSetTRNormType`` to choose the
+preconditioner's norm instead, which these lack).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def _get(name: str, ksp: PETSc.KSP) -> float:
 
 
 def direction_norm(ksp: PETSc.KSP) -> float:
-    """||d||_M of the last solve's direction d."""
+    """||d||_2 of the last solve's direction d."""
     return _get("KSPCGGetNormD", ksp)
 
 

@@ -103,6 +103,7 @@ class HessianChoice:
         self.descent_solves = 0  # ascent directions of CG replaced (the whole run)
         self._extra_linear_its = 0  # CG iterations of those replacements, this SNES solve
         self._radius = None  # auto with CG: the trust radius once the step met indefiniteness
+        self._in_region = False  # ... the KSP was switched to KSPSTCG by _trust_region
         self._longest = 0.0  # ... the longest Newton direction of the step so far (its start)
         self._step_taken = None  # (alpha, ||y||) of the step the last model ratio judged
         self.trust_region_its = 0  # iterations solved by KSPSTCG in a trust region (the run)
@@ -338,17 +339,18 @@ class HessianChoice:
         elif rho is not None and self._step_taken is not None:
             self._radius = trust_radius(self._radius, rho, *self._step_taken)
         self._step_taken = None
-        if ksp.getType() != "stcg":
+        if not self._in_region:
             ksp.setType("stcg")
+            self._in_region = True
         ksp_trust_region.set_radius(ksp, self._radius)
         self.trust_region_its += 1
 
     def _stcg_curvature(self, y: PETSc.Vec, slope: float) -> float | None:
         """y^T A y of the direction y (KSPSTCG's d, perhaps scaled since) from the solve's
         model value m(d) = 1/2 d^T A d - r . d: no assembly. None if the last solve was
-        not KSPSTCG's or its direction was zero."""
+        not KSPSTCG's in the trust region, failed, or gave a zero direction."""
         ksp = self.snes.getKSP()
-        if ksp.getType() != "stcg":
+        if not self._in_region or ksp.getConvergedReason() < 0:
             return None
         norm_d = ksp_trust_region.direction_norm(ksp)
         if not norm_d > 0.0:
@@ -357,10 +359,11 @@ class HessianChoice:
         return 2.0 * t * t * (ksp_trust_region.model_value(ksp) + slope / t)
 
     def leave_trust_region(self) -> None:
-        """Plain CG again (the step ended, or a full Newton step is wanted)."""
-        ksp = self.snes.getKSP()
-        if ksp.getType() == "stcg":
-            ksp.setType("cg")
+        """Plain CG again (the step ended, or a full Newton step is wanted), if
+        :meth:`_trust_region` made it KSPSTCG (a KSPSTCG of the user's options stays)."""
+        if self._in_region:
+            self.snes.getKSP().setType("cg")
+            self._in_region = False
 
     def _aij_matrix(self) -> PETSc.Mat:
         """The AIJ preconditioning matrix (made at its first use), the target of

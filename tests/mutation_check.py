@@ -281,6 +281,11 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_hessian_modes.py::test_trust_region_under_mpi",),
              "the abs-filtered Hessian assembled into the MatConvert target (new nonzeros: a "
              "PETSc error on 2 ranks)"),
+    Mutation("users-stcg-switched-to-cg", "fem_anim/newton_hessian.py",
+             "        if self._in_region:\n            self.snes.getKSP().setType(\"cg\")",
+             "        if True:\n            self.snes.getKSP().setType(\"cg\")",
+             ("tests/test_hessian_modes.py::test_a_users_own_stcg_is_left_alone",),
+             "every step start makes the KSP CG, the user's -ksp_type stcg included"),
     Mutation("cg-ascent-direction-kept", "fem_anim/newton_hessian.py",
              "or r.dot(y) > 0.0:", "or r.dot(y) > -1e300:",
              ("tests/test_hessian_modes.py::test_auto_with_cg_replaces_an_ascent_direction",),

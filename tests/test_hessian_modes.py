@@ -452,3 +452,17 @@ def test_trust_region_under_mpi():
     for a, b in zip(serial["energies"], parallel["energies"], strict=True):
         for key in ("kinetic", "elastic"):
             assert b[key] == pytest.approx(a[key], rel=1e-8), key
+
+
+def test_a_users_own_stcg_is_left_alone():
+    """``-ksp_type stcg`` from the command line: auto neither truncates nor manages a
+    trust region of its own, and never switches the user's KSP to CG between steps."""
+    scene = load_scene(None, ["mesh.element_size=0.1", "output.render=false"])
+    sim = Simulation(scene, MPI.COMM_WORLD, {"ksp_type": "stcg", "ksp_cg_radius": "100"},
+                     preset="cg-icc")
+    state = sim.initial_state()
+    for _ in range(2):
+        state, stats = sim.step(state, 1 / 60)
+        assert stats.reason > 0
+        assert sim.minimiser.snes.getKSP().getType() == "stcg"
+    assert sim.minimiser.hessian.trust_region_its == 0
