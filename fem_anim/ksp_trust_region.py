@@ -1,8 +1,8 @@
 """The trust-region controls of PETSc's KSPSTCG, which petsc4py does not wrap.
 
 ``KSPCGSetRadius``, ``KSPCGGetNormD`` and ``KSPCGGetObjFcn`` exist under these names in
-PETSc 3.18 and 3.22 (Debian 12 and 13) but not in their petsc4py: they are called in the
-PETSc library petsc4py loaded, through ctypes, with the KSP's handle. The radius bounds the
+PETSc 3.18 and 3.22 (Debian 12 and 13) but not in their petsc4py: they are called through
+ctypes in the PETSc library petsc4py links, with the KSP's handle. The radius bounds the
 Euclidean norm ||d||_2 of the direction in both versions (measured by
 tests/test_ksp_trust_region.py; later releases add ``KSPCGSetTRNormType`` to choose the
 preconditioner's norm instead, which these lack).
@@ -20,19 +20,13 @@ __all__ = ["set_radius", "direction_norm", "model_value"]
 
 @functools.lru_cache(maxsize=1)
 def _library() -> ctypes.CDLL:
-    """The PETSc shared library this process has loaded (through petsc4py)."""
-    with open("/proc/self/maps", encoding="ascii", errors="replace") as maps:
-        paths = {line.split()[-1] for line in maps
-                 if "libpetsc" in line and ".so" in line.split()[-1]}
-    for path in sorted(paths):
-        library = ctypes.CDLL(path)
-        if hasattr(library, "KSPCGSetRadius"):
-            library.KSPCGSetRadius.argtypes = [ctypes.c_void_p, ctypes.c_double]
-            for name in ("KSPCGGetNormD", "KSPCGGetObjFcn"):
-                getattr(library, name).argtypes = [ctypes.c_void_p,
-                                                   ctypes.POINTER(ctypes.c_double)]
-            return library
-    raise RuntimeError("the PETSc library petsc4py loaded was not found in /proc/self/maps")
+    """petsc4py's extension module, whose symbol look-up (``dlsym``) also searches the
+    libraries it links, PETSc's among them: the PETSc petsc4py uses, whatever its path."""
+    library = ctypes.CDLL(PETSc.__file__)
+    library.KSPCGSetRadius.argtypes = [ctypes.c_void_p, ctypes.c_double]
+    for name in ("KSPCGGetNormD", "KSPCGGetObjFcn"):
+        getattr(library, name).argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_double)]
+    return library
 
 
 def _check(code: int) -> None:

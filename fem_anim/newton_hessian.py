@@ -166,15 +166,16 @@ class HessianChoice:
         the filtered Hessian: g(x), r.y and y^T H y with H unprojected
         (:meth:`fem_anim.problem.EnergyProblem.curvature`).
         """
-        if self._truncated:
-            self._longest = max(self._longest, y.norm())
+        length = y.norm() if self._truncated else None
+        if length is not None:
+            self._longest = max(self._longest, length)
         if not (self.mode == "trust_region_filter" or self._radius is not None or
                 (self.mode == "auto" and self._filtered)):
             self.drop_model()
             return
         g = self._objective(self.snes, x)
         slope = self.problem_residual.dot(y)
-        curvature = self._stcg_curvature(y, slope) if self._radius is not None else None
+        curvature = self._stcg_curvature(length, slope) if self._radius is not None else None
         if curvature is None:
             curvature = self.problem.curvature(x, y)
         if self._model is None:
@@ -345,17 +346,18 @@ class HessianChoice:
         ksp_trust_region.set_radius(ksp, self._radius)
         self.trust_region_its += 1
 
-    def _stcg_curvature(self, y: PETSc.Vec, slope: float) -> float | None:
-        """y^T A y of the direction y (KSPSTCG's d, perhaps scaled since) from the solve's
-        model value m(d) = 1/2 d^T A d - r . d: no assembly. None if the last solve was
-        not KSPSTCG's in the trust region, failed, or gave a zero direction."""
+    def _stcg_curvature(self, length: float, slope: float) -> float | None:
+        """y^T A y of the direction y (KSPSTCG's d, perhaps scaled since; ``length`` = ||y||,
+        ``slope`` = r . y) from the solve's model value m(d) = 1/2 d^T A d - r . d: no
+        assembly. None if the last solve was not KSPSTCG's in the trust region, failed, or
+        gave a zero direction."""
         ksp = self.snes.getKSP()
         if not self._in_region or ksp.getConvergedReason() < 0:
             return None
         norm_d = ksp_trust_region.direction_norm(ksp)
         if not norm_d > 0.0:
             return None
-        t = y.norm() / norm_d  # y = t d (a step bound may have scaled it)
+        t = length / norm_d  # y = t d (a step bound may have scaled it)
         return 2.0 * t * t * (ksp_trust_region.model_value(ksp) + slope / t)
 
     def leave_trust_region(self) -> None:

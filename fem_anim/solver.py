@@ -236,6 +236,8 @@ class Minimiser:
     def seed_objective(self, x: PETSc.Vec, value: float) -> None:
         """g(x) just evaluated by the caller for the next :meth:`solve`'s start: remembered
         like SNES's own evaluations (:meth:`objective`), so it is not assembled again."""
+        if self._g_seed is not None:  # an earlier seed no solve took
+            self._g_seed[0].destroy()
         self._g_seed = (x.copy(), value)
 
     def solve(self, x: PETSc.Vec, what: str = "step") -> SolveStats:

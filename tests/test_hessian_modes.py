@@ -210,7 +210,8 @@ def test_auto_with_cg_steps_in_a_trust_region(tmp_path):
             solves.append((choice._radius, ksp_trust_region.direction_norm(ksp),
                            ksp.getConvergedReason()))
             slope = sim.minimiser.b.dot(y)
-            curvatures.append((choice._stcg_curvature(y, slope), sim.problem.curvature(x, y)))
+            curvatures.append((choice._stcg_curvature(y.norm(), slope),
+                               sim.problem.curvature(x, y)))
         record(x, y)
 
     choice.record_model = spy
