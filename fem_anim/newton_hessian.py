@@ -155,6 +155,13 @@ class HessianChoice:
             self.problem.set_hessian_filter(None)
             self.leave_trust_region()
 
+    def count_polish(self, steps: int) -> None:
+        """Count the round-off polish's full Newton steps (:meth:`~fem_anim.solver.Minimiser.
+        _polish`, after :meth:`end_step`) under the Hessian the problem then assembles: exact,
+        or the filter in place (``project``, ``abs``; ``trust_region_filter``'s last choice).
+        """
+        self.its[getattr(self.problem, "hessian_filter", None) or "exact"] += steps
+
     def counts(self) -> dict[str, int]:
         """This step's Newton iterations per kind of Hessian."""
         return {kind: self.its[kind] for kind in HESSIAN_KINDS}

@@ -16,8 +16,9 @@ the solver's prefix (default ``fem_anim_``), merged with the precedence of
   per iteration by the trust-region ratio, or ``auto``: exact while the Hessian is positive
   definite, abs-filtered when it is not (:mod:`fem_anim.hessian`); each step's iterations are
   counted per kind of Hessian (:attr:`SolveStats.hessian_its`);
-* ``max_iterations`` and ``on_budget``: a budget of Newton iterations per step (the
-  polish's full steps included; at most the preset's ``snes_max_it``, which it replaces).
+* ``max_iterations`` and ``on_budget``: a budget of Newton iterations per step (every
+  direction computed: one whose line search or linear solve failed, and the polish's full
+  steps, included; at most the preset's ``snes_max_it``, which it replaces).
   ``"fail"``: a step that does not meet its test within it fails (DIVERGED_MAX_IT, and the
   adaptive stepper retries with dt halved); ``"accept"``: the last iterate is kept if it
   decreased the step objective below g at the initial guess, reported with
@@ -97,6 +98,10 @@ POLISH_FAILED_REASON = 6
 #: (no PETSc reason is 7): accepted, *not* converged to the test; stats.csv, the energy
 #: report and summary.json say so, and ``residual_ratio`` says by how much.
 BUDGET_REASON = 7
+#: SNES reasons of a solve whose last iteration computed a direction and then dropped it
+#: (its linear solve or line search failed): PETSc does not count that iteration.
+_FAILED_DIRECTION = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
+                     PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
 #: Reasons of a step that met its stopping test.
 CONVERGED_REASONS = (2, 3, DECREMENT_REASON)
 
@@ -110,7 +115,12 @@ class SolveStats:
     relative test is ``residual_norm <= snes_rtol r0``); ``shift`` the last Hessian shift c;
     times are wall seconds. ``reason`` is :data:`POLISH_FAILED_REASON` for a step kept at
     the round-off floor without meeting its test.
-    ``hessian_its`` the Newton iterations per kind of Hessian (:data:`HESSIAN_KINDS`).
+    ``newton_its`` counts every Newton iteration: every direction computed, those whose
+    line search or linear solve failed (which PETSc leaves out) and the round-off polish's
+    full steps included; ``hessian_its`` the same iterations per kind of Hessian
+    (:data:`HESSIAN_KINDS`; they sum to ``newton_its`` when the Hessian is assembled at
+    every iteration); ``linear_its`` every linear iteration of the step's solves (SNES's,
+    the descent-direction replacements', the round-off check's and the polish's).
     ``residual_ratio`` is ``residual_norm / max(snes_atol, snes_rtol r0)``: <= 1 where
     the norm test is met, its excess for a step accepted at its budget
     (:data:`BUDGET_REASON`). ``hessian_assemblies`` counts the Hessians assembled
@@ -156,6 +166,7 @@ class Minimiser:
         self.budget = settings.get("max_iterations")  # None: the preset's snes_max_it
         self.on_budget = settings.get("on_budget", "fail")
         self._polish_its = 0  # full Newton steps of the last polish
+        self._own_linear_its = 0  # linear iterations of newton_step's solves, this step
         self._polish_assemblies = 0  # ... that assembled a Hessian
         self._restarting = False  # auto continues a failed solve (HessianChoice.restart)
         # -mat_type (aij, baij) picks the Hessian's storage; PETSc never reads it for a
@@ -258,6 +269,7 @@ class Minimiser:
         self.hessian.start_step()
         self.reuse.start_step()
         self._polish_its = self._polish_assemblies = 0
+        self._own_linear_its = 0
         self._restarting = False
         g0 = self.objective(self.snes, x)
         newton_its = linear_its = 0
@@ -266,7 +278,8 @@ class Minimiser:
                 self.snes.setTolerances(max_it=self.budget - newton_its)
             self._snes_solve(x, what)
             reason = self.snes.getConvergedReason()
-            newton_its += self.snes.getIterationNumber()
+            # a direction computed and dropped is an iteration too (PETSc leaves it out)
+            newton_its += self.snes.getIterationNumber() + (reason in _FAILED_DIRECTION)
             linear_its += self.snes.getLinearSolveIterations() + self.hessian.solved()
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)
@@ -292,11 +305,12 @@ class Minimiser:
                     self._polish_its += kept_its
             else:
                 reason, norm = self._polish(x, max_steps=steps)
-            if self.budget is not None:  # the polish's full Newton steps are iterations
-                newton_its += self._polish_its
+            newton_its += self._polish_its  # the polish's full Newton steps are iterations
+            self.hessian.count_polish(self._polish_its)
         elif reason == PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT and \
                 self.budget is not None and self.on_budget == "accept":
             reason = self._accept_at_budget(x, g0, norm, what)
+        linear_its += self._own_linear_its  # the round-off check's and the polish's solves
         wall = time.perf_counter() - start
         factor1, solve1 = (e.getPerfInfo()["time"] for e in self._events)
         stats = SolveStats(
@@ -510,6 +524,7 @@ class Minimiser:
         else:
             with options_in_database(self.prefix, self.options):  # MUMPS reads its own here
                 ksp.solve(r, step)
+        self._own_linear_its += ksp.getIterationNumber()
         return 0.5 * abs(r.dot(step))
 
     def _polish(self, x: PETSc.Vec, max_steps: int = 5,

@@ -68,6 +68,7 @@ class Mutation:
 IND = "tests/test_independent_checks.py"
 CONTACT = "tests/test_contact.py"
 REF = "tests/test_reference_comparison.py"
+MODES = "tests/test_hessian_modes.py"
 
 MUTATIONS: list[Mutation] = [
     # -- the six bugs of issue 19 ------------------------------------------------------------
@@ -281,6 +282,16 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_hessian_modes.py::test_trust_region_under_mpi",),
              "the abs-filtered Hessian assembled into the MatConvert target (new nonzeros: a "
              "PETSc error on 2 ranks)"),
+    Mutation("polish-steps-uncounted", "fem_anim/solver.py",
+             "            newton_its += self._polish_its  # the polish",
+             "            newton_its += 0 * self._polish_its  # the polish",
+             (f"{MODES}::test_every_newton_iteration_is_counted_under_its_hessian",),
+             "the round-off polish's full Newton steps left out of newton_its"),
+    Mutation("dropped-direction-uncounted", "fem_anim/solver.py",
+             "getIterationNumber() + (reason in _FAILED_DIRECTION)",
+             "getIterationNumber() + 0 * (reason in _FAILED_DIRECTION)",
+             (f"{MODES}::test_every_newton_iteration_is_counted_under_its_hessian",),
+             "a direction whose line search failed left out of newton_its (PETSc's count)"),
     Mutation("users-stcg-switched-to-cg", "fem_anim/newton_hessian.py",
              "        if self._in_region:\n            self.snes.getKSP().setType(\"cg\")",
              "        if True:\n            self.snes.getKSP().setType(\"cg\")",

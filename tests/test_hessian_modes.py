@@ -49,6 +49,30 @@ def test_auto_is_exact_newton_on_an_easy_scene():
     np.testing.assert_array_equal(results["auto"][1], results["exact"][1])
 
 
+@pytest.mark.parametrize("mode", ["exact", "project"])
+def test_every_newton_iteration_is_counted_under_its_hessian(mode):
+    """newton_its counts every Newton direction computed: the ones SNES took, the last
+    one of a solve whose line search failed at the objective's round-off (PETSc leaves
+    it out) and the polish's full Newton steps after it; hessian_its names the Hessian
+    of each of them (issue point 5). The undamped coarse beam ends some steps at the
+    objective's round-off floor (exact: steps 11-13, step 12 by a failed line search)."""
+    scene = load_scene(None, ["mesh.element_size=0.1", "time.steps=14", "damping.beta=0",
+                              f'solver.hessian="{mode}"'])
+    sim = Simulation(scene, MPI.COMM_WORLD)
+    state, polished, dropped = sim.initial_state(), 0, 0
+    kind = "exact" if mode == "exact" else "clamp"
+    for _ in range(14):
+        state, stats = sim.step(state, scene["time"]["dt"])
+        assert _kinds(stats) == {kind: stats.newton_its}, (state.step, stats.hessian_its)
+        taken = sim.minimiser.snes.getIterationNumber() + sim.minimiser._polish_its
+        assert stats.newton_its in (taken, taken + 1), state.step
+        polished += sim.minimiser._polish_its > 0
+        dropped += stats.newton_its == taken + 1
+    assert polished >= 1, polished
+    if mode == "exact":  # step 12: 2 SNES iterations, the dropped one, 1 polish step
+        assert dropped >= 1
+
+
 def test_auto_converges_on_the_crushed_cube_where_exact_fails(tmp_path):
     # step 1 or 2 (as in test_solver_menu): where exact Newton's line search first fails
     # depends on MUMPS's pivoting options and on the mesher's cube
