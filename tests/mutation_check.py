@@ -290,7 +290,7 @@ MUTATIONS: list[Mutation] = [
     Mutation("dropped-direction-uncounted", "fem_anim/solver.py",
              "getIterationNumber() + (reason in _FAILED_DIRECTION)",
              "getIterationNumber() + 0 * (reason in _FAILED_DIRECTION)",
-             (f"{MODES}::test_every_newton_iteration_is_counted_under_its_hessian",),
+             (f"{MODES}::test_a_direction_whose_solve_failed_is_counted",),
              "a direction whose line search failed left out of newton_its (PETSc's count)"),
     Mutation("users-stcg-switched-to-cg", "fem_anim/newton_hessian.py",
              "        if self._in_region:\n            self.snes.getKSP().setType(\"cg\")",
