@@ -280,7 +280,7 @@ class HessianChoice:
         if self._truncated:
             self._precondition(snes, x, A, how, self._cg_saw_indefinite(snes))
             if how is not None or self._indefinite_seen:
-                self._trust_region(rho)
+                self._trust_region(rho, A)
         self.its[how or "exact"] += 1
 
     def _cg_saw_indefinite(self, snes) -> bool:
@@ -322,7 +322,7 @@ class HessianChoice:
         if current.handle != wanted.handle:  # SNES passes (J, P) to the KSP after this call
             snes.setJacobian(callback, J, wanted, *(args or ()), **(kargs or {}))
 
-    def _trust_region(self, rho: float | None) -> None:
+    def _trust_region(self, rho: float | None, A: PETSc.Mat) -> None:
         """``auto`` with CG, once the step has met an indefinite Hessian: Newton-CG in a trust
         region (Steihaug 1983; Nocedal & Wright, Algorithms 4.1 and 7.2), by KSPSTCG.
 
@@ -335,7 +335,7 @@ class HessianChoice:
         iterate leaves it, so the direction's length is the model's reach rather than the
         Newton step's. Delta starts at the length of the step's longest Newton direction so
         far (its first, from the initial guess: the scale of the step's motion; a step bound
-        or the line search cuts it at once) and then follows
+        or the line search cuts it at once; before any, :meth:`_jacobi_length`) and then follows
         :func:`fem_anim.hessian.trust_radius` (rho of the exact model, whose curvature
         y^T A y comes from KSPSTCG's model value: no assembly). The line search on g still
         decides the step's length, and the stopping test is unchanged. The preconditioner
@@ -343,7 +343,7 @@ class HessianChoice:
         """
         ksp = self.snes.getKSP()
         if self._radius is None:
-            self._radius = self._longest if self._longest > 0.0 else 1.0
+            self._radius = self._longest if self._longest > 0.0 else self._jacobi_length(A)
         elif rho is not None and self._step_taken is not None:
             self._radius = trust_radius(self._radius, rho, *self._step_taken)
         self._step_taken = None
@@ -352,6 +352,19 @@ class HessianChoice:
             self._in_region = True
         ksp_trust_region.set_radius(ksp, self._radius)
         self.trust_region_its += 1
+
+    def _jacobi_length(self, A: PETSc.Mat) -> float:
+        """||D^-1 r||, D = |diag A|: the length of the Jacobi step from the current iterate,
+        the first trust radius of a step that has no Newton direction yet (a restart before
+        any line search). Collective."""
+        d = A.getDiagonal()
+        d.abs()
+        step = self.problem_residual.duplicate()
+        step.pointwiseDivide(self.problem_residual, d)
+        length = step.norm()
+        d.destroy()
+        step.destroy()
+        return length
 
     def _stcg_curvature(self, length: float, slope: float) -> float | None:
         """y^T A y of the direction y (KSPSTCG's d, perhaps scaled since; ``length`` = ||y||,

@@ -282,6 +282,11 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_hessian_modes.py::test_trust_region_under_mpi",),
              "the abs-filtered Hessian assembled into the MatConvert target (new nonzeros: a "
              "PETSc error on 2 ranks)"),
+    Mutation("first-radius-literal", "fem_anim/newton_hessian.py",
+             "else self._jacobi_length(A)", "else 1.0",
+             (f"{MODES}::test_a_trust_region_without_a_newton_direction_starts_at_the_"
+              "jacobi_step",),
+             "the first trust radius of a step without a Newton direction a fixed 1 m"),
     Mutation("polish-steps-uncounted", "fem_anim/solver.py",
              "            newton_its += self._polish_its  # the polish",
              "            newton_its += 0 * self._polish_its  # the polish",

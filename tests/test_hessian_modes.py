@@ -271,6 +271,37 @@ def test_auto_with_cg_steps_in_a_trust_region(tmp_path):
         assert from_model == pytest.approx(assembled, rel=1e-8, abs=1e-14)
 
 
+def test_a_trust_region_without_a_newton_direction_starts_at_the_jacobi_step(tmp_path):
+    """A step whose trust region starts before any Newton direction was recorded (a restart
+    before a line search: never met on the 55k beam's 15 trust regions nor on the crushed
+    cubes, so forced here by forgetting the directions) takes Delta_0 = ||D^-1 r||, D =
+    |diag A|, the Jacobi step's length at that iterate (computed here in numpy), and the
+    steps still meet their test."""
+    sim = squash(tmp_path, hessian="auto", element_size=0.1, solver='preset = "cg-icc"')
+    choice = sim.minimiser.hessian
+    first = []
+    trust_region = choice._trust_region
+
+    def forget(rho, A):
+        if choice._radius is None:
+            choice._longest = 0.0
+            r = choice.problem_residual.array
+            first.append(np.linalg.norm(r / np.abs(A.getDiagonal().array)))
+            trust_region(rho, A)
+            first[-1] = (first[-1], choice._radius)
+        else:
+            trust_region(rho, A)
+
+    choice._trust_region = forget
+    state = sim.initial_state()
+    for _ in range(4):
+        state, stats = sim.step(state, 0.05)
+        assert stats.reason > 0
+    assert first
+    for expected, radius in first:
+        assert 0.0 < radius == pytest.approx(expected, rel=1e-12)
+
+
 @pytest.mark.parametrize("hessian", ["abs", "trust_region_filter"])
 def test_filtered_modes_crush_the_cube_with_a_filtered_hessian_only(tmp_path, hessian):
     sim = squash(tmp_path, hessian=hessian, element_size=0.1)
