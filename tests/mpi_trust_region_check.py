@@ -26,8 +26,8 @@ radii = []  # the radius of every trust-region iteration, on this rank
 enter = choice._trust_region
 
 
-def spy(rho):
-    enter(rho)
+def spy(rho, A):
+    enter(rho, A)
     radii.append(choice._radius)
 
 
