@@ -35,15 +35,18 @@ from . import ksp_trust_region
 from .errors import ConvergenceError
 from .hessian import ShiftStrategy, model_ratio, trust_radius, trust_region_choice
 
-__all__ = ["HessianChoice", "HESSIAN_KINDS", "MAX_AUTO_RESTARTS", "cg_probe"]
+__all__ = ["HessianChoice", "HESSIAN_KINDS", "FAILED_DIRECTION", "MAX_AUTO_RESTARTS",
+           "cg_probe"]
 
 #: The Hessians a Newton iteration may use (counted per step):
 #: exact, exact + c I with c > 0, elastic tangent clamped, elastic tangent abs-filtered.
 HESSIAN_KINDS = ("exact", "shift", "clamp", "abs")
-#: SNES reasons after which ``hessian = "auto"`` continues the step with the filtered Hessian:
-#: CG met negative curvature (a failed linear solve), or the direction was no descent.
-_AUTO_RESTART = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
-                 PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
+#: SNES reasons of a solve whose last iteration computed a direction and then dropped it: its
+#: linear solve failed (CG met negative curvature) or its line search did (no descent). PETSc
+#: does not count that iteration (:class:`~fem_anim.solver.SolveStats` does); after either,
+#: ``hessian = "auto"`` continues the step with the filtered Hessian.
+FAILED_DIRECTION = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
+                    PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
 #: How often one step of ``auto`` may continue after such a failure.
 MAX_AUTO_RESTARTS = 4
 
@@ -140,7 +143,7 @@ class HessianChoice:
         # (measured: step 55 of the 55k beam kept at ||r|| / ||r_0|| = 0.1 by the polish)
         truncated = bool(self._truncated) and \
             self.snes.getKSP().getConvergedReason() < 0
-        if self.mode != "auto" or reason not in _AUTO_RESTART or (stalled and not truncated) \
+        if self.mode != "auto" or reason not in FAILED_DIRECTION or (stalled and not truncated) \
                 or self.restarts >= MAX_AUTO_RESTARTS or self._last_iterate is None:
             return False
         self.restarts += 1
@@ -160,7 +163,7 @@ class HessianChoice:
         _polish`, after :meth:`end_step`) under the Hessian the problem then assembles: exact,
         or the filter in place (``project``, ``abs``; ``trust_region_filter``'s last choice).
         """
-        self.its[getattr(self.problem, "hessian_filter", None) or "exact"] += steps
+        self.its[self.problem.hessian_filter or "exact"] += steps
 
     def counts(self) -> dict[str, int]:
         """This step's Newton iterations per kind of Hessian."""

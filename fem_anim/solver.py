@@ -56,7 +56,7 @@ from petsc4py import PETSc
 
 from .errors import ConvergenceError, FemAnimError
 from .hessian_reuse import HessianReuse
-from .newton_hessian import HESSIAN_KINDS, HessianChoice
+from .newton_hessian import FAILED_DIRECTION, HESSIAN_KINDS, HessianChoice
 from .petsc_options import DEFAULT_PREFIX, options_in_database, unused_options
 from .problem import EVENTS
 
@@ -98,10 +98,6 @@ POLISH_FAILED_REASON = 6
 #: (no PETSc reason is 7): accepted, *not* converged to the test; stats.csv, the energy
 #: report and summary.json say so, and ``residual_ratio`` says by how much.
 BUDGET_REASON = 7
-#: SNES reasons of a solve whose last iteration computed a direction and then dropped it
-#: (its linear solve or line search failed): PETSc does not count that iteration.
-_FAILED_DIRECTION = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
-                     PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
 #: Reasons of a step that met its stopping test.
 CONVERGED_REASONS = (2, 3, DECREMENT_REASON)
 
@@ -268,8 +264,7 @@ class Minimiser:
             self._g_seed = None
         self.hessian.start_step()
         self.reuse.start_step()
-        self._polish_its = self._polish_assemblies = 0
-        self._own_linear_its = 0
+        self._polish_its = self._polish_assemblies = self._own_linear_its = 0
         self._restarting = False
         g0 = self.objective(self.snes, x)
         newton_its = linear_its = 0
@@ -279,7 +274,7 @@ class Minimiser:
             self._snes_solve(x, what)
             reason = self.snes.getConvergedReason()
             # a direction computed and dropped is an iteration too (PETSc leaves it out)
-            newton_its += self.snes.getIterationNumber() + (reason in _FAILED_DIRECTION)
+            newton_its += self.snes.getIterationNumber() + (reason in FAILED_DIRECTION)
             linear_its += self.snes.getLinearSolveIterations() + self.hessian.solved()
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and self._at_objective_roundoff(x, g0)

@@ -61,10 +61,13 @@ def squash(tmp_path, model="stvk", hessian="exact", dt=0.05, steps=4, element_si
 
 
 def run_steps(sim, steps, dt):
+    """``steps`` steps of ``dt`` from the initial state, each ending converged (a positive
+    reason); the final state and the Newton iterations in all."""
     state = sim.initial_state()
     its = 0
     for _ in range(steps):
         state, stats = sim.step(state, dt)
+        assert stats.reason > 0
         its += stats.newton_its
     return state, its
 
