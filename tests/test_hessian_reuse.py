@@ -95,7 +95,11 @@ def test_kept_hessian_under_mpi_equals_serial(tmp_path, name):
     assert_same_run(tmp_path / "n1", tmp_path / "n2")
     a, b = (read_stats(tmp_path / f"n{n}" / "stats.csv") for n in (1, 2))
     assert total(b, "hessian_assemblies") < total(b, "newton_its")
-    assert abs(total(a, "newton_its") - total(b, "newton_its")) <= len(a)
+    # Steps that end at the round-off floor may end differently on 2 ranks: +-1 SNES
+    # iteration, and since newton_its counts every direction computed, a dropped one and the
+    # polish's steps too (Debian 13, rest_lbfgs: 40 against 37 in PETSc's count, 49 against
+    # 44-45 counted so; the states agree either way, assert_same_run)
+    assert abs(total(a, "newton_its") - total(b, "newton_its")) <= 2 * len(a)
 
 
 @pytest.mark.parametrize("solver, message", [
