@@ -10,7 +10,7 @@
 #
 #     x_{n+1} = argmin_x  g(x) = m/2 (x - y)^2 + w E(x),
 #
-# with the predictor y and weight w of `fem_anim.integrator.Integrator` (the same objects the
+# with the predictor y and weight w of `fem_anim.simulation.integrators.Integrator` (the same objects the
 # finite-element time loop uses): Newmark y = x_n + h v_n + h^2/4 a_n, w = h^2/4; implicit
 # Euler y = x_n + h v_n, w = h^2; symplectic Euler the same with E linearised at x_n, so
 # g = m/2 (x - y)^2 + h^2 E'(x_n) x. For this quadratic E one Newton step from any point is the
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.integrator import Integrator, State
+from fem_anim.simulation.integrators import Integrator, State
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 OUT = Path(os.environ.get("FEM_ANIM_DEMO_OUT", "out/demos"))

@@ -3,7 +3,7 @@
 #
 # `demos/imported_mesh.toml` reads `meshes/data/icosphere.stl`, a closed triangle surface
 # (a twice-subdivided icosahedron of radius 0.1 m), which gmsh fills with tetrahedra
-# (`fem_anim.mesh.read_mesh_file`). The soft neo-Hookean ball (E = 2e4 Pa, nu = 0.3,
+# (`fem_anim.mesh.build.read_mesh_file`). The soft neo-Hookean ball (E = 2e4 Pa, nu = 0.3,
 # 1000 kg/m^3) is thrown with `[initial]` velocity v_0 = (0.5, 0, 3) m/s and angular velocity
 # omega = (0, 10, 0) rad/s about its centre of mass, under gravity g = (0, 0, -9.81) m/s^2;
 # the spin stretches it (centrifugal strain rho omega^2 r^2 / E = 0.05) and it wobbles.
@@ -31,8 +31,8 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_anim.reference import cell_volumes, deformation_gradient
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent
@@ -95,7 +95,7 @@ if MPI.COMM_WORLD.rank == 0:
     assert drift < 0.01
     assert J.min() > 0
     if not REDUCED:
-        from fem_anim.render import render_file
+        from fem_anim.render.process import render_file
 
         render_file(run.output_dir / "final.vtu", OUT / "imported_mesh.png",
                     title=f"icosphere.stl thrown with a spin, t = {t:.2f} s")

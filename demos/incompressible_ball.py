@@ -8,7 +8,7 @@
 #
 #     g(u, p) = 1/2 ||u - y||_M^2 + w int [ psi_dev(F) + p (J - 1) - p^2 / (2 kappa) ] dX,
 #
-# with the stable neo-Hookean deviatoric part psi_dev (`forms/mixed.py`) and 1/kappa = 0,
+# with the stable neo-Hookean deviatoric part psi_dev (`forms/incompressible.py`) and 1/kappa = 0,
 # u in P2 and p in P1 (Taylor-Hood). The pressure has no inertia. For every P1 function q
 # the step's solution satisfies int q (J - 1) dX = 0, so with q = 1 the volume of the body
 # is exactly its rest volume (to the solver tolerance), while single cells may still
@@ -32,8 +32,8 @@ from fem_anim.forms.kinematics import deformation_gradient
 from mpi4py import MPI
 
 from fem_anim import compat
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent

@@ -13,9 +13,9 @@
 #     b(d) = -(d - d_hat)^2 ln(d / d_hat) for d < d_hat, 0 beyond,
 #
 # d the height of a boundary point above the ground, d_hat = 3 mm, and D the lagged friction
-# potential (mu = 0.5, eps_v = 1 cm/s; `forms/contact.py`). Newton's line search never
+# potential (mu = 0.5, eps_v = 1 cm/s; `forms/obstacle_contact.py`). Newton's line search never
 # evaluates a state where a contact point touches the ground: its direction is scaled so no
-# point comes closer than a tenth of its distance (`fem_anim/contact.py`).
+# point comes closer than a tenth of its distance (`fem_anim/contact/obstacles.py`).
 #
 # The demo asserts its physics: no vertex is ever at or below the ground in any frame; the
 # cube bounces (loses contact again after the first impact); it comes to rest on the ground
@@ -34,8 +34,8 @@ import meshio
 import numpy as np
 from mpi4py import MPI
 
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent

@@ -4,14 +4,14 @@
 # Several bodies in contact (issue 16): a jelly box (neo-Hookean, E = 2e4 Pa), a rubber ball
 # (stable neo-Hookean, 5e4 Pa), a wooden-ish log (corotated, 1e5 Pa) and a ring (StVK,
 # 3e4 Pa) fall onto the ground and onto each other. All four are one DOLFINx mesh (the
-# union of the bodies' meshes, `fem_anim/body.py`), so each step is one minimisation
+# union of the bodies' meshes, `fem_anim/mesh/bodies.py`), so each step is one minimisation
 # (seed eq. 4, implicit Euler with w = h^2)
 #
 #     g(x) = 1/2 ||x - y||_M^2 + w [ E_elastic(x) + E_gravity(x) + E_ground(x) + B(x) + D(x) ],
 #
-# where E_ground is the obstacle barrier of the ground plane (`forms/contact.py`) and B the
+# where E_ground is the obstacle barrier of the ground plane (`forms/obstacle_contact.py`) and B the
 # IPC Toolkit's barrier between all boundary surfaces, bodies with each other and each
-# with itself (`fem_anim/ipc_contact.py`),
+# with itself (`fem_anim/contact/ipc.py`),
 #
 #     B(x) = kappa sum_k a_k b(d_k^2, d_hat^2) / d_hat^3,
 #     b(s, s_hat) = -(s - s_hat)^2 ln(s / s_hat) for s < s_hat,
@@ -37,9 +37,9 @@ import meshio
 import numpy as np
 from mpi4py import MPI
 
-from fem_anim.intersection import crossed_frames
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.contact.intersection import crossed_frames
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent

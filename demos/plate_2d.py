@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent
@@ -80,7 +80,7 @@ if rank0:
     assert abs(w_dynamic / w_static - 1.0) < 0.005
     assert abs(w_static / w_beam - 1.0) < 0.03
     if not REDUCED:
-        from fem_anim.render import render_file
+        from fem_anim.render.process import render_file
 
         render_file(swing.output_dir / "final.vtu", OUT / "plate_2d.png",
                     title=f"2D plate at rest, tip sag {w_dynamic * 1e3:.1f} mm")

@@ -8,7 +8,7 @@
 #
 # Each step minimises g(x) = 1/2 ||x - y||_M^2 + h^2/4 E(x) (seed eq. 4) with the handles'
 # vertices as Dirichlet values x = c + R(omega t)(X - c) (Rodrigues' formula,
-# `fem_anim.pin.PinMotion`). The demo asserts:
+# `fem_anim.problem.handles.PinMotion`). The demo asserts:
 #
 # * the measured twist of each end face (the angle between X - c and x - c in the y-z
 #   plane, from the written displacement) equals the prescribed -/+ omega min(t, 1 s);
@@ -30,8 +30,8 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_anim.reference import deformation_gradient
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent
@@ -87,7 +87,7 @@ if MPI.COMM_WORLD.rank == 0:
     assert abs(length - 1.0) < 0.05
 
     if not REDUCED:
-        from fem_anim.render import render_file
+        from fem_anim.render.process import render_file
 
         render_file(run.output_dir / "final.vtu", OUT / "twisted_bar.png",
                     title=f"twisted bar, t = {t:.2f} s, 180 degrees")

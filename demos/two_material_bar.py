@@ -5,7 +5,7 @@
 # whose gmsh physical volumes `left` (x < 0.1 m) and `right` (x > 0.1 m) become regions of
 # different material: the body's `[material]` (neo-Hookean, E_1 = 1e5 Pa, nu = 0,
 # 1000 kg/m^3) on the left, and a `[[region]]` named `right` with E_2 = 1e6 Pa. The elastic
-# energy is a sum over the regions (`fem_anim.region`),
+# energy is a sum over the regions (`fem_anim.mesh.regions`),
 #
 #     E(u) = int_left psi(F; mu_1, lmbda_1) dV + int_right psi(F; mu_2, lmbda_2) dV,
 #
@@ -35,8 +35,8 @@ from mpi4py import MPI
 from scipy.optimize import brentq
 
 from fem_anim.reference import deformation_gradient
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent
@@ -95,7 +95,7 @@ if MPI.COMM_WORLD.rank == 0:
     assert abs(ratio / (E2 / E1) - 1.0) < 0.02
     assert last["kinetic"] < 1e-4 * last["elastic"], "the bar should have come to rest"
     if not REDUCED:
-        from fem_anim.render import render_file
+        from fem_anim.render.process import render_file
 
         render_file(run.output_dir / "final.vtu", OUT / "two_material_bar.png",
                     title="soft (left) and stiff (right) halves pulled by 2 mm")

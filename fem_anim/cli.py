@@ -19,9 +19,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from .console import OneLineParser, print_error, quiet_jit_logging
-from .errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
-from .petsc_options import check_cli_options, init_petsc, split_petsc_args
+from fem_anim.console import OneLineParser, print_error, quiet_jit_logging
+from fem_anim.errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
+from fem_anim.petsc_options import check_cli_options, init_petsc, split_petsc_args
 
 __all__ = ["main", "build_parser"]
 
@@ -90,7 +90,7 @@ def _output_directory(args, scene) -> str:
 def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     from mpi4py import MPI
 
-    from .scene import load_scene
+    from fem_anim.scene.schema import load_scene
 
     if args.solver is not None and not args.solver.strip():
         raise FemAnimError("--solver needs a preset name (see `fem-anim solvers`), got ''")
@@ -98,12 +98,12 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     overrides = (['solver.mode="preview"'] if args.preview else []) + args.overrides
     scene = load_scene(args.scene, overrides)  # validate before importing dolfinx
     out = _output_directory(args, scene)
-    from .simulation import Simulation
+    from fem_anim.simulation.loop import Simulation
 
-    from .energy import describe_energy, energy_report, initial_energies, write_summary
-    from .provenance import software_versions
-    from .interrupt import stop_at_once
-    from .rundir import read_manifest, write_manifest
+    from fem_anim.simulation.energy_report import describe_energy, energy_report, initial_energies, write_summary
+    from fem_anim.output.provenance import software_versions
+    from fem_anim.simulation.interrupt import stop_at_once
+    from fem_anim.output.rundir import read_manifest, write_manifest
 
     quiet_jit_logging()
     with stop_at_once():  # a signal while meshing or compiling: stop, leave no JIT lock
@@ -144,10 +144,10 @@ def _render(args) -> int:
 
     from mpi4py import MPI
 
-    from .animation import check_run_directory
-    from .render import render_run
-    from .rundir import check_not_in_use
-    from .scene import validate_render
+    from fem_anim.render.animation import check_run_directory
+    from fem_anim.render.process import render_run
+    from fem_anim.output.rundir import check_not_in_use
+    from fem_anim.scene.schema import validate_render
 
     outdir = Path(args.outdir)
     check_run_directory(outdir)
@@ -168,18 +168,18 @@ def _bench(argv: list[str]) -> int:
     """``fem-anim bench``: the trade study, or with ``--extremes`` / ``--perf`` / ``--hard``
     another bench (``--perf --hard`` is the perf bench's 60k run)."""
     if "--perf" in argv:
-        from .bench import perf  # written on another branch (issue 9)
+        from fem_anim.bench import perf  # written on another branch (issue 9)
 
         return perf.main([a for a in argv if a != "--perf"])
     if "--hard" in argv:
-        from .bench import hard
+        from fem_anim.bench import hard
 
         return hard.main([a for a in argv if a != "--hard"])
     if "--extremes" in argv:
-        from .bench import extremes
+        from fem_anim.bench import extremes
 
         return extremes.main([a for a in argv if a != "--extremes"])
-    from .bench import trade
+    from fem_anim.bench import trade
 
     return trade.main(argv)
 
@@ -199,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
             return _bench(app_args[1:])
         args = build_parser().parse_args(app_args)
         if args.command == "solvers":
-            from .presets import describe_presets
+            from fem_anim.solver.presets import describe_presets
 
             print(describe_presets())
             return 0

@@ -10,7 +10,7 @@ import argparse
 import logging
 import sys
 
-from .errors import FemAnimError
+from fem_anim.errors import FemAnimError
 
 __all__ = ["OneLineParser", "print_error", "quiet_jit_logging"]
 

@@ -25,7 +25,7 @@ import os
 import sys
 from collections.abc import Iterable, Iterator, Mapping
 
-from .errors import FemAnimError
+from fem_anim.errors import FemAnimError
 
 __all__ = [
     "DEFAULT_PREFIX",
@@ -146,7 +146,7 @@ def options_in_database(prefix: str, options: Mapping[str, str]) -> Iterator[Non
 
 
 #: Options fem_anim reads itself (PETSc never reads ``mat_type`` for a matrix the
-#: application creates: :class:`fem_anim.solver.Minimiser` takes it).
+#: application creates: :class:`fem_anim.solver.minimiser.Minimiser` takes it).
 READ_BY_FEM_ANIM = frozenset({"mat_type"})
 
 

@@ -1,7 +1,7 @@
 """UFL definitions of the energies and integrators (installed as ``fem_anim.forms``).
 
 Pure UFL functions of F, the displacement and material parameters: no mesh, function
-space or PETSc here (STYLE rule 2). :mod:`fem_anim.problem` binds them to DOLFINx.
+space or PETSc here (STYLE rule 2). :mod:`fem_anim.problem.objective` binds them to DOLFINx.
 
 Modules: :mod:`.kinematics` (F, strains), :mod:`.lame`, one module per material
 (:mod:`.linear`, :mod:`.stvk`, :mod:`.corotated`, :mod:`.neohookean`,

@@ -47,7 +47,7 @@ import numpy as np
 import ufl
 from ufl.core.expr import Expr
 
-from .kinematics import dimension, invariants
+from fem_anim.forms.kinematics import dimension, invariants
 
 __all__ = [
     "polar_rotation",

@@ -8,7 +8,7 @@ x_d and time scale tau from the history, adding
     D(x) = c/2 (x - x_d)^T C (x - x_d),        c = w/tau,
 
 to g(x) = 1/2 ||x - y||_M^2 + w E(x) makes its stationarity M(x - y) + w (grad E + C v_{n+1}) = 0,
-the damped scheme. :mod:`fem_anim.integrator` gives (c, x_d) per scheme.
+the damped scheme. :mod:`fem_anim.simulation.integrators` gives (c, x_d) per scheme.
 
 1/2 d^T K_0 d is the linear-elastic energy of the displacement d (every material of
 ``forms/`` has the linear-elastic Hessian at rest, with the same mu and lambda), so
@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import ufl
 
-from . import linear
-from .kinematics import deformation_gradient
+from fem_anim.forms import linear
+from fem_anim.forms.kinematics import deformation_gradient
 
 __all__ = ["dissipation_potential"]
 

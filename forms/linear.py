@@ -17,7 +17,7 @@ from __future__ import annotations
 import ufl
 from ufl.core.expr import Expr
 
-from .kinematics import small_strain
+from fem_anim.forms.kinematics import small_strain
 
 __all__ = ["psi"]
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from ufl.core.expr import Expr
 
-from . import corotated, linear, neohookean, stable_neohookean, stvk
+from fem_anim.forms import corotated, linear, neohookean, stable_neohookean, stvk
 
 __all__ = ["EXTRA_DATA", "MATERIALS", "ExtraData", "Material", "get_material"]
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from ufl.core.expr import Expr
 
-from .kinematics import dimension, invariants
+from fem_anim.forms.kinematics import dimension, invariants
 
 __all__ = ["psi_dev"]
 

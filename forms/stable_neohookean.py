@@ -29,7 +29,7 @@ import math
 import ufl
 from ufl.core.expr import Expr
 
-from .kinematics import dimension, invariants
+from fem_anim.forms.kinematics import dimension, invariants
 
 __all__ = ["psi", "remap_lame"]
 

@@ -2,7 +2,7 @@
 
 Each builder takes a ``gmsh.model``, adds its geometry and physical groups, meshes it
 and returns the model. Builders never initialise or finalise gmsh: the caller owns the
-session (see :func:`fem_anim.mesh.build_mesh`). Every builder names the physical group
+session (see :func:`fem_anim.mesh.build.build_mesh`). Every builder names the physical group
 ``body`` (tag 1) of its cells and ``surface`` (tag 1, one dimension lower) of its whole
 boundary, plus the parts of the boundary a scene may refer to (``xmin``, ``side``, ...).
 :func:`structured_box` (numpy, no gmsh) cuts a box into a regular grid of simplices
@@ -16,13 +16,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-from .box import build_box
-from .capsule import build_capsule
-from .cylinder import build_cylinder
-from .sphere import build_sphere
-from .structured import structured_box
-from .surface import build_volume_from_surface
-from .torus import build_torus
+from fem_anim.meshes.box import build_box
+from fem_anim.meshes.capsule import build_capsule
+from fem_anim.meshes.cylinder import build_cylinder
+from fem_anim.meshes.sphere import build_sphere
+from fem_anim.meshes.structured import structured_box
+from fem_anim.meshes.surface import build_volume_from_surface
+from fem_anim.meshes.torus import build_torus
 
 __all__ = [
     "BUILDERS",

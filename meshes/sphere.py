@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from .common import name_body, padded_origin, set_element_size
+from fem_anim.meshes.common import name_body, padded_origin, set_element_size
 
 __all__ = ["build_sphere"]
 

@@ -82,7 +82,7 @@ README_RTOL, README_ATOL = 1e-8, 1e-12
 def assert_rows_meet_the_test(rows, rtol: float = README_RTOL, atol: float = README_ATOL):
     """Every stats row met its residual test: reason 2 or 3 (not the polish's 6) and
     ``residual_norm <= max(atol, rtol initial_residual_norm)``."""
-    from fem_anim.solver import CONVERGED_REASONS
+    from fem_anim.solver.minimiser import CONVERGED_REASONS
 
     for row in rows:
         target = max(atol, rtol * row["initial_residual_norm"])

@@ -5,7 +5,7 @@ Usage (from the repository's top; the default scene unless a scene file is given
     .venv/bin/python tests/hessian_update_table.py [SCENE.toml] [--steps N] [--set KEY=VALUE ...]
 
 Runs the scene once per option below, in this order, each with a fresh
-:class:`~fem_anim.simulation.Simulation` (forms from FFCx's disk cache after the first), and
+:class:`~fem_anim.simulation.loop.Simulation` (forms from FFCx's disk cache after the first), and
 prints a Markdown table: Newton iterations, Hessian assemblies and factorisations (PCSetUp
 events) per step, retries, the solve's wall time per step, and the final displacement's
 relative L2 distance to the exact-Newton run. Serial only (the distance is over the
@@ -20,8 +20,8 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from fem_anim.scene import load_scene
-from fem_anim.simulation import AdaptiveStepper, Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import AdaptiveStepper, Simulation
 
 #: (label, solver keys); the first is the reference.
 OPTIONS = [

@@ -25,7 +25,7 @@ from fem_anim.petsc_options import init_petsc
 init_petsc([])
 
 from fem_anim.bench.hard import HardScene, _crushed_cube, _scene  # noqa: E402
-from fem_anim.simulation import Simulation  # noqa: E402
+from fem_anim.simulation.loop import Simulation  # noqa: E402
 
 #: Central differences at e = 1e-6 measured 5e-9 and 2e-8 relative (the O(e^2) term and
 #: round-off); the lifting's ghost bug gave 1e-1.

@@ -5,19 +5,19 @@ Usage (``tests/test_reference_mpi.py`` runs it)::
     mpirun -n 2 python tests/mpi_reference_check.py [--full]
 
 The parallel counterpart of ``tests/test_reference_comparison.py``: rank 0 makes the meshes
-with :func:`fem_anim.reference.box_mesh`, :func:`fem_anim.mesh.mesh_from_arrays` distributes
+with :func:`fem_anim.reference.box_mesh`, :func:`fem_anim.mesh.build.mesh_from_arrays` distributes
 them, and every DOLFINx result is brought back to rank 0 in input vertex order
-(:class:`fem_anim.output.VertexGather`) and compared there with :mod:`fem_anim.reference`:
+(:class:`fem_anim.output.files.VertexGather`) and compared there with :mod:`fem_anim.reference`:
 
 1. elastic energy, gradient (``ufl.derivative`` of ``EnergyProblem.ufl_elastic``) and Hessian
    at a randomly perturbed state; the matrices are compared through their action ``H z`` on
    random vectors (PETSc ``mult`` on the distributed matrix, result gathered);
 2. the step objective, residual and Jacobian that SNES minimises (the callbacks
    ``EnergyProblem.objective``, ``residual``, ``jacobian``: assembled forms plus the constant
-   terms of :mod:`fem_anim.constant_terms`) with a random predictor, the mass matrix
+   terms of :mod:`fem_anim.problem.constant_terms`) with a random predictor, the mass matrix
    (``M z``) and the kinetic energy;
 3. ten steps of a beam pinned at ``x = 0`` and hanging under gravity, stepped by
-   :class:`fem_anim.simulation.Simulation` across the ranks, against
+   :class:`fem_anim.simulation.loop.Simulation` across the ranks, against
    :func:`fem_anim.reference.simulate`.
 
 Without ``--full``: the neo-Hookean, StVK and corotated materials (the last is the one whose
@@ -44,10 +44,10 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import compat, reference
-from fem_anim.mesh import mesh_from_arrays
-from fem_anim.output import VertexGather
-from fem_anim.problem import EnergyProblem
-from fem_anim.simulation import Simulation
+from fem_anim.mesh.build import mesh_from_arrays
+from fem_anim.output.files import VertexGather
+from fem_anim.problem.objective import EnergyProblem
+from fem_anim.simulation.loop import Simulation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_reference_comparison import (  # noqa: E402 (the serial test's beam scenes)
@@ -166,7 +166,7 @@ class Distributed:
 
     def step_callbacks(self, probes: list[np.ndarray]):
         """The objective, residual and Jacobian actions SNES gets at the current u (the
-        assembled forms plus the constant terms, :mod:`fem_anim.constant_terms`)."""
+        assembled forms plus the constant terms, :mod:`fem_anim.problem.constant_terms`)."""
         p = self.problem
         value = p.objective(None, self._state())
         b = p.create_vector()

@@ -56,7 +56,7 @@ def test_without_adaptivity_the_same_run_stops_cleanly(tmp_path, capsys):
     assert "did not converge" in err and f"--resume {out}" in err
     # nothing poses as a result; the staging area is kept for --resume
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".fem_anim-")) \
-        == [".partial"]  # and the run directory's marker and lock (fem_anim/rundir.py)
+        == [".partial"]  # and the run directory's marker and lock (fem_anim/output/rundir.py)
 
 
 def test_min_dt_floor_is_reported(tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""Analytic checks of the discretisation, driven through :class:`fem_anim.simulation.Simulation`.
+"""Analytic checks of the discretisation, driven through :class:`fem_anim.simulation.loop.Simulation`.
 
 Three kinds of exact results, each known in closed form for the discrete equations, so the
 assertions are at round-off or at the Newton tolerance rather than at a discretisation error:
@@ -69,9 +69,9 @@ from scenes import POISSON_RATIO, YOUNGS_MODULUS, beam, make_scene
 from test_reference_comparison import rotation
 
 from fem_anim import compat, reference
-from fem_anim.mesh import mesh_from_arrays
-from fem_anim.problem import EnergyProblem
-from fem_anim.simulation import Simulation
+from fem_anim.mesh.build import mesh_from_arrays
+from fem_anim.problem.objective import EnergyProblem
+from fem_anim.simulation.loop import Simulation
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
                                 reason="serial: the checks work on global dof arrays")

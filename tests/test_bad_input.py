@@ -32,7 +32,7 @@ from test_cli import BAD_INPUT
 
 from fem_anim.cli import main
 from fem_anim.errors import SceneError
-from fem_anim.scene import (
+from fem_anim.scene.schema import (
     INTEGRATORS,
     MATERIAL_MODELS,
     MESH_SHAPES,

@@ -17,7 +17,7 @@ from fem_anim.bench import perf
 from fem_anim.bench.timing import growth_exponent
 from fem_anim.bench.worker import PHASE_COLUMNS, measure
 from fem_anim.errors import FemAnimError
-from fem_anim.scene import load_scene
+from fem_anim.scene.schema import load_scene
 
 TINY = ["mesh.element_size=0.1", "output.render=false"]
 
@@ -74,7 +74,7 @@ def test_bad_arguments_exit_2_with_one_line(argv, fragment, capsys):
 
 def test_baij_hessian_gives_the_same_step(tiny_scene):
     """-mat_type baij (blocked storage, faster assembly) changes nothing in the result."""
-    from fem_anim.simulation import Simulation
+    from fem_anim.simulation.loop import Simulation
 
     finals = []
     for options in ({}, {"mat_type": "baij"}):
@@ -92,7 +92,7 @@ def test_baij_hessian_gives_the_same_step(tiny_scene):
 
 
 def test_bad_mat_type_is_named(tiny_scene):
-    from fem_anim.simulation import Simulation
+    from fem_anim.simulation.loop import Simulation
 
     with pytest.raises(FemAnimError, match="mat_type"):
         Simulation(tiny_scene, MPI.COMM_WORLD, {"mat_type": "dense"})
@@ -164,7 +164,7 @@ def test_60k_run_plain_newton_fails_fem_anim_finishes():
 
 def test_baij_presets_fall_back_to_aij_under_another_preconditioner():
     """cg-icc stores the Hessian as BAIJ; -pc_type gamg (which rejects BAIJ) drops it."""
-    from fem_anim.presets import PRESETS, drop_replaced
+    from fem_anim.solver.presets import PRESETS, drop_replaced
 
     assert PRESETS["cg-icc"]["mat_type"] == "baij"
     assert "mat_type" not in drop_replaced(PRESETS["cg-icc"], {"pc_type": "gamg"})

@@ -21,9 +21,9 @@ from petsc4py import PETSc
 
 from fem_anim import compat
 from fem_anim.cli import main
-from fem_anim.intersection import crossed_frames
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.contact.intersection import crossed_frames
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 #: Two soft cubes of different materials thrown at each other, the right one turned 10 deg.
 TWO_CUBES = """
@@ -62,7 +62,7 @@ def _collect():
 
 def intersection_free(points: np.ndarray, cells: np.ndarray, frames) -> list[bool]:
     """For each displacement in ``frames``: no surface triangle crosses another (the surface
-    from the tetrahedra alone: :mod:`fem_anim.intersection`, not the contact code's)."""
+    from the tetrahedra alone: :mod:`fem_anim.contact.intersection`, not the contact code's)."""
     crossed = set(crossed_frames(points, cells, frames))
     return [k not in crossed for k in range(len(frames))]
 
@@ -305,7 +305,7 @@ def test_block_on_a_slope_sticks_below_the_friction_angle(tmp_path, angle):
     """mu = 0.5 (friction angle 26.6 deg): at 15 deg the block stays (it moves less than
     3 % of a frictionless slide: the fall onto the slope and IPC's creep below eps_v), at
     40 deg it slides with a = g (sin - mu cos), measured over its last 0.1 s, to 1 %."""
-    from fem_anim.body import rotation_matrix
+    from fem_anim.mesh.bodies import rotation_matrix
 
     R = rotation_matrix([0, angle, 0], 3)
     offset = R @ np.array([0.15, 0.075, 0.052])  # 2 mm above the slope

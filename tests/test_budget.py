@@ -20,8 +20,8 @@ from test_cli import read_stats
 
 from fem_anim.cli import main
 from fem_anim.errors import ConvergenceError
-from fem_anim.simulation import AdaptiveStepper, Simulation
-from fem_anim.solver import BUDGET_REASON, CONVERGED_REASONS
+from fem_anim.simulation.loop import AdaptiveStepper, Simulation
+from fem_anim.solver.minimiser import BUDGET_REASON, CONVERGED_REASONS
 
 DT = 1.0 / 30.0
 #: The accepted x of a one-step budget against x_0 - alpha H^-1 r computed here: both are
@@ -171,7 +171,7 @@ def test_budget_covers_auto_restarts(tmp_path, monkeypatch):
     are forced here (truncation off) so that the path is taken."""
     from test_solver_menu import squash
 
-    from fem_anim.newton_hessian import HessianChoice
+    from fem_anim.solver.hessian_choice import HessianChoice
 
     solver = 'preset = "cg-icc"\nmax_iterations = 3\non_budget = "accept"'
     for truncate in (True, False):

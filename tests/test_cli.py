@@ -18,7 +18,7 @@ import pytest
 from conftest import ROOT, assert_rows_meet_the_test, clean_environment, fem_anim_command
 
 from fem_anim.cli import main
-from fem_anim.scene import default_scene_text, load_scene
+from fem_anim.scene.schema import default_scene_text, load_scene
 
 
 def read_stats(path: Path) -> list[dict[str, float]]:
@@ -253,7 +253,7 @@ def test_summary_records_provenance(default_run):
     import ufl
     from petsc4py import PETSc
 
-    from fem_anim.simulation import solver_options
+    from fem_anim.simulation.loop import solver_options
 
     summary = json.loads((default_run / "summary.json").read_text())
     versions = summary["versions"]

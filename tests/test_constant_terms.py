@@ -1,4 +1,4 @@
-"""The terms of g assembled once (:mod:`fem_anim.constant_terms`) against g as one form.
+"""The terms of g assembled once (:mod:`fem_anim.problem.constant_terms`) against g as one form.
 
 The callbacks SNES calls assemble w E(x) per call and add the inertia, Rayleigh damping and
 gravity terms from matrices and a vector assembled once. Here they are compared with the
@@ -29,9 +29,9 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import compat
-from fem_anim.problem import compile_forms
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.problem.objective import compile_forms
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 PIN_VELOCITY = np.array([0.0, 0.3, 0.1])  # m/s
 SCENE = ["mesh.size=[1.0,0.1,0.1]", "mesh.element_size=0.1", "damping.alpha=0.7",

@@ -2,7 +2,7 @@
 the step bound, and the physics of bodies dropped on a plane and on a sphere.
 
 * assembly: the DOLFINx contact energy, gradient and Hessian equal
-  :mod:`fem_anim.reference.contact` on the reference beam in near contact (every bottom
+  :mod:`fem_anim.reference.obstacle_barrier` on the reference beam in near contact (every bottom
   vertex inside the activation distance), plane and sphere, 2D and 3D;
 * derivatives: the oracle's gradient and Hessian against finite differences, and a Taylor
   test of the DOLFINx barrier + friction terms (remainder O(eps^2));
@@ -35,9 +35,9 @@ from scenes import make_scene
 from test_reference_comparison import Comparison
 
 from fem_anim import compat, reference
-from fem_anim.contact import KEEP_FRACTION
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.contact.obstacles import KEEP_FRACTION
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: reference dof map")
 EPS = np.finfo(float).eps

@@ -16,8 +16,8 @@ from mpi4py import MPI
 
 from fem_anim.errors import SceneError
 from fem_anim.forms.damping import dissipation_potential
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 
 def bar(tmp_path, integrator="newmark", alpha=None, beta=None, extra=""):
@@ -171,7 +171,7 @@ def test_newmark_pins_move_at_their_prescribed_rates(tmp_path):
 
 def test_handle_rates_are_the_derivatives_of_its_path():
     """Central differences of the displacement give the velocity and acceleration."""
-    from fem_anim.pin import PinMotion
+    from fem_anim.problem.handles import PinMotion
 
     rng = np.random.default_rng(1)
     for d in (2, 3):

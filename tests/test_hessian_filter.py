@@ -1,4 +1,4 @@
-"""Eigenvalue filtering of the material tangent and the trust-region choice (fem_anim.hessian).
+"""Eigenvalue filtering of the material tangent and the trust-region choice (fem_anim.solver.hessian_modification).
 
 Numpy only: constructed per-point tangents with known eigensystems, filtered per point, and
 the clamp/abs choice of the trust-region filter on a constructed sequence of ratios.
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fem_anim.hessian import (RHO_TOLERANCE, abs_psd, filter_tangent, model_ratio,
+from fem_anim.solver.hessian_modification import (RHO_TOLERANCE, abs_psd, filter_tangent, model_ratio,
                               positive_definite, project_psd, trust_region_choice)
 
 

@@ -20,10 +20,10 @@ from test_solver_menu import run_steps, squash
 
 from fem_anim import compat
 from fem_anim.errors import ConvergenceError
-from fem_anim.newton_hessian import cg_probe
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
-from fem_anim.solver import HESSIAN_KINDS
+from fem_anim.solver.hessian_choice import cg_probe
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
+from fem_anim.solver.minimiser import HESSIAN_KINDS
 
 
 def _kinds(stats) -> dict:
@@ -76,7 +76,7 @@ def test_a_direction_whose_solve_failed_is_counted(tmp_path, monkeypatch):
     the linear solve (DIVERGED_LINEAR_SOLVE) and the step continues filtered (a restart).
     The failed iteration assembled its Hessian and solved with it: newton_its counts it,
     so the iterations per Hessian kind still sum to newton_its."""
-    from fem_anim.newton_hessian import HessianChoice
+    from fem_anim.solver.hessian_choice import HessianChoice
 
     monkeypatch.setattr(HessianChoice, "_truncate_cg",
                         lambda self: setattr(self, "_truncated", False))
@@ -236,7 +236,7 @@ def test_auto_with_cg_steps_in_a_trust_region(tmp_path):
     the assembled y^T H y. (Measured, 4 steps: 29 Newton / 277 CG iterations, without the
     trust region 29 / 294; on frames 46-60 of the undamped ~55k beam 203 / 6741 against
     197 / 8155, 25.3 s against 28.3 s.)"""
-    from fem_anim import ksp_trust_region
+    from fem_anim.solver import trust_region as ksp_trust_region
 
     sim = squash(tmp_path, hessian="auto", element_size=0.1, solver='preset = "cg-icc"')
     choice, ksp = sim.minimiser.hessian, sim.minimiser.snes.getKSP()
@@ -308,7 +308,7 @@ def test_filtered_modes_crush_the_cube_with_a_filtered_hessian_only(tmp_path, he
 
 def test_trust_region_filter_follows_rho_in_the_solver(tmp_path, monkeypatch):
     """Each iteration's filter is trust_region_choice(rho) of the previous step's rho."""
-    from fem_anim.hessian import RHO_TOLERANCE, trust_region_choice
+    from fem_anim.solver.hessian_modification import RHO_TOLERANCE, trust_region_choice
 
     sim = squash(tmp_path, hessian="trust_region_filter", element_size=0.1)
     seen = []
@@ -376,7 +376,7 @@ def test_reduced_hard_bench_table():
 
 def _default_run(frames: int, hessian: str, extra=()) -> list[dict]:
     """The default scene for ``frames`` frames (adaptive stepper): its stats rows."""
-    from fem_anim.simulation import AdaptiveStepper
+    from fem_anim.simulation.loop import AdaptiveStepper
 
     scene = load_scene(None, [f"time.steps={frames}", f'solver.hessian="{hessian}"', *extra])
     sim = Simulation(scene, MPI.COMM_WORLD)

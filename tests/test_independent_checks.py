@@ -39,8 +39,8 @@ from test_contact import GAP, near_contact_positions, reference_scene
 from test_reference_comparison import Comparison, beam_mesh, reference_order, write_scene
 
 from fem_anim import compat, reference
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: reference dof map")
 
@@ -319,8 +319,8 @@ def test_every_accepted_step_meets_the_residual_test():
 def test_polish_meets_the_test_or_reports_it(tmp_path):
     """_polish: full Newton steps from near the solution meet a reachable test (reason 2/3),
     an unreachable one is reported as POLISH_FAILED_REASON, in stats and the energy report."""
-    from fem_anim.energy import describe_energy, energy_report, initial_energies
-    from fem_anim.solver import POLISH_FAILED_REASON
+    from fem_anim.simulation.energy_report import describe_energy, energy_report, initial_energies
+    from fem_anim.solver.minimiser import POLISH_FAILED_REASON
 
     scene = write_scene(tmp_path, 3, "neohookean", integrator="implicit_euler", pinned=True)
     # an unreachable test: the line search stalls at the round-off floor of g, the polish

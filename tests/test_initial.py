@@ -1,4 +1,4 @@
-"""Initial velocity and angular velocity of a body (``[initial]``, :mod:`fem_anim.initial`).
+"""Initial velocity and angular velocity of a body (``[initial]``, :mod:`fem_anim.simulation.initial_state`).
 
 * A free body (no gravity, no pins) given a velocity translates rigidly: u = v t and the
   momentum p = sum_i (M v)_i stay exact to round-off, and Newmark's a_0 is zero.
@@ -22,8 +22,8 @@ from scenes import DENSITY, DIVISIONS, LENGTHS, beam, make_scene, toml_list
 from test_analytic import box, cross, scipy_matrix
 
 from fem_anim.errors import SceneError
-from fem_anim.initial import rigid_velocity
-from fem_anim.simulation import Simulation
+from fem_anim.simulation.initial_state import rigid_velocity
+from fem_anim.simulation.loop import Simulation
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
                                 reason="serial: the checks work on global dof arrays")

@@ -1,4 +1,4 @@
-"""Time integrators on a vibrating bar, driven through :class:`fem_anim.simulation.Simulation`.
+"""Time integrators on a vibrating bar, driven through :class:`fem_anim.simulation.loop.Simulation`.
 
 The body is a coarse 1 x 0.1 x 0.1 m bar (``mesh.element_size = 0.1``, 86 vertices) pinned at
 x = 0, without gravity, so the motion is the undamped free vibration of
@@ -34,7 +34,7 @@ from mpi4py import MPI
 from scenes import bar, make_scene
 
 from fem_anim.errors import ConvergenceError
-from fem_anim.simulation import Simulation
+from fem_anim.simulation.loop import Simulation
 
 serial_only = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
                                  reason="serial only: dense modal analysis on global dof arrays")
@@ -281,7 +281,7 @@ def omega_max(bars) -> dict[str, float]:
 
     Exact for this mesh: the largest generalised eigenvalue of K phi = omega^2 M phi on the free
     dofs: 1254 rad/s (consistent), 641 rad/s (lumped), so h_crit = 2/omega_max = 1.60 ms and
-    3.12 ms. The a-priori estimate c_p / element size of forms/integrator.py gives 116 rad/s
+    3.12 ms. The a-priori estimate c_p / element size of forms/time_schemes.py gives 116 rad/s
     here, an order of magnitude too low (c_p = 11.6 m/s; the shortest edge is 0.07 m).
     """
     out = {}

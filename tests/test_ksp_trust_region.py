@@ -1,5 +1,5 @@
-"""KSPSTCG's trust region through :mod:`fem_anim.ksp_trust_region` (ctypes), and the radius
-rule :func:`fem_anim.hessian.trust_radius`, against closed-form answers."""
+"""KSPSTCG's trust region through :mod:`fem_anim.solver.trust_region` (ctypes), and the radius
+rule :func:`fem_anim.solver.hessian_modification.trust_radius`, against closed-form answers."""
 
 from __future__ import annotations
 
@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 from petsc4py import PETSc
 
-from fem_anim import compat, ksp_trust_region
-from fem_anim.hessian import trust_radius
+from fem_anim import compat
+
+from fem_anim.solver import trust_region as ksp_trust_region
+from fem_anim.solver.hessian_modification import trust_radius
 
 
 def _diagonal(values) -> PETSc.Mat:

@@ -1,4 +1,4 @@
-"""Terms of the step objective as compiled by :class:`fem_anim.problem.EnergyProblem`.
+"""Terms of the step objective as compiled by :class:`fem_anim.problem.objective.EnergyProblem`.
 
 g(u) = 1/2 ||u - u_pred||_M^2 + w [ int psi(F(u)) dV - int rho g.u dV ]      (seed eq. 4)
 
@@ -31,8 +31,8 @@ from petsc4py import PETSc
 
 from fem_anim import compat
 from fem_anim.errors import SceneError
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 COMM = MPI.COMM_WORLD
 RHO = 1000.0  # kg/m^3, the default scene's density

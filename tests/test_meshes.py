@@ -23,9 +23,9 @@ from mpi4py import MPI
 from fem_anim import meshes
 from fem_anim.cli import main
 from fem_anim.errors import MeshError, SceneError
-from fem_anim.mesh import build_mesh, cell_volumes, check_cells, check_surface, mesh_from_arrays
-from fem_anim.reference.mesh import box_mesh
-from fem_anim.scene import MESH_SHAPES, SCHEMA, load_scene
+from fem_anim.mesh.build import build_mesh, cell_volumes, check_cells, check_surface, mesh_from_arrays
+from fem_anim.reference.box_mesh import box_mesh
+from fem_anim.scene.schema import MESH_SHAPES, SCHEMA, load_scene
 
 DATA = ROOT / "meshes" / "data"
 sys.path.insert(0, str(DATA))
@@ -457,7 +457,7 @@ def test_structured_scene_gives_the_peers_beam(tmp_path):
 
 def test_a_body_of_several_takes_its_structured_divisions_too(tmp_path):
     """[[body]] meshes go through the same builder choice: divisions make the structured box."""
-    from fem_anim.body import build_scene_mesh
+    from fem_anim.mesh.bodies import build_scene_mesh
 
     box = 'mesh = { shape = "box", size = [0.1, 0.1, 0.1], %s }\n'
     text = ('name = "two"\n[contact]\ndhat = 0.005\n'

@@ -1,9 +1,9 @@
 """The mixed (u, p) formulation for nearly and exactly incompressible solids (issue 17).
 
-Taylor-Hood P2/P1 with the perturbed Lagrangian of ``fem_anim/forms/mixed.py``:
+Taylor-Hood P2/P1 with the perturbed Lagrangian of ``fem_anim/forms/incompressible.py``:
 
 * Cook's membrane (plane strain, nu = 0.499975) converges to the published mid-edge
-  displacement 16.4326 (``fem_anim/bench/incompressible.py``);
+  displacement 16.4326 (``fem_anim/bench/mixed_verification.py``);
 * a manufactured solution gives the L2 orders 3 (u) and 2 (p) of Taylor-Hood;
 * an exactly incompressible body (nu = 0.5) keeps what the weak constraint guarantees:
   int q g(J) dX = 0 for every P1 q, so with g = J - 1 (stable neo-Hookean, Mooney-Rivlin)
@@ -22,18 +22,18 @@ import scipy.sparse as sp
 import ufl
 from conftest import mpirun_command
 from fem_anim.forms.kinematics import deformation_gradient
-from fem_anim.forms.mixed import MIXED_MATERIALS
+from fem_anim.forms.incompressible import MIXED_MATERIALS
 from mpi4py import MPI
 from scenes import beam, make_scene, wall_pin
 
 from fem_anim import compat
-from fem_anim.bench.incompressible import COOK_REFERENCE, cook_membrane, manufactured_errors
-from fem_anim.simulation import Simulation
+from fem_anim.bench.mixed_verification import COOK_REFERENCE, cook_membrane, manufactured_errors
+from fem_anim.simulation.loop import Simulation
 
 
 def test_cook_membrane_converges_to_the_published_value():
     """Mid-edge u_y of n x n meshes: -5.51 %, -1.91 %, -0.77 % (n = 4, 8, 16), measured;
-    n = 32 gives -0.28 % (``python -m fem_anim.bench.incompressible --full``). The
+    n = 32 gives -0.28 % (``python -m fem_anim.bench.mixed_verification --full``). The
     re-entrant corner limits the rate: successive differences shrink by 3.1 then 2.4."""
     values = [cook_membrane(n) for n in (4, 8, 16)]
     errors = [v / COOK_REFERENCE - 1.0 for v in values]
@@ -191,7 +191,7 @@ def test_mixed_run_under_mpi_equals_serial(tmp_path, preset):
     assert_same_run(outs[1], outs[2])
 
 
-# -- the numpy reference (fem_anim/reference/mixed.py) -----------------------------------------
+# -- the numpy reference (fem_anim/reference/mixed_energy.py) -----------------------------------------
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial reference")
 @pytest.mark.parametrize("d", [2, 3])
 @pytest.mark.parametrize("model", ["neohookean", "stable_neohookean", "mooney_rivlin"])
@@ -202,12 +202,12 @@ def test_mixed_energy_matches_the_numpy_reference(d, model):
     relative to the largest entry, as ASSEMBLY_RTOL in test_reference_comparison.py."""
     from dolfinx import fem
     from dolfinx.fem import petsc as fem_petsc
-    from fem_anim.forms.mixed import lagrangian
+    from fem_anim.forms.incompressible import lagrangian
 
     from fem_anim import reference
-    from fem_anim.mesh import mesh_from_arrays
-    from fem_anim.output import VertexGather
-    from fem_anim.reference.mixed import mixed_energy, mixed_gradient, mixed_hessian
+    from fem_anim.mesh.build import mesh_from_arrays
+    from fem_anim.output.files import VertexGather
+    from fem_anim.reference.mixed_energy import mixed_energy, mixed_gradient, mixed_hessian
 
     points, cells = reference.box_mesh((3,) * d, (1.0,) + (0.5,) * (d - 1))
     domain = mesh_from_arrays(MPI.COMM_SELF, points, cells, None, "mixed reference")
@@ -268,7 +268,7 @@ def test_the_default_scene_mixed_names_its_damping():
     """The default scene's Rayleigh damping (beta K_0 needs lambda, infinite at nu = 0.5) is
     refused with the way out; with beta = 0 the same scene loads."""
     from fem_anim.errors import SceneError
-    from fem_anim.scene import load_scene
+    from fem_anim.scene.schema import load_scene
 
     mixed = ["element.degree=2", 'element.formulation="mixed"']
     with pytest.raises(SceneError, match=r"set damping.alpha = damping.beta = 0"):

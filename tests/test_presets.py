@@ -6,7 +6,7 @@ the final displacement in ``final.vtu``. The iterative presets solve each Newton
 a relative residual of 1e-10, so Newton ends at the same minimiser. Measured: energies
 within 1.3e-12 and displacements within 6e-14 (relative) of ``cholesky``, the classical
 Richardson iterations included (damped Jacobi, Gauss-Seidel and SOR all converge on this
-Hessian; see :mod:`fem_anim.presets`). Asserted: 2e-11 and 1e-12 (README: "the same steps
+Hessian; see :mod:`fem_anim.solver.presets`). Asserted: 2e-11 and 1e-12 (README: "the same steps
 to 1e-12"). Every stats row of every preset meets the residual test.
 
 Precedence, lowest to highest: defaults < preset < scene ``[solver.petsc]`` < command line,
@@ -28,7 +28,7 @@ from mpi4py import MPI
 
 from fem_anim.cli import main
 from fem_anim.errors import FemAnimError, SceneError
-from fem_anim.presets import (
+from fem_anim.solver.presets import (
     NEWTON_DEFAULTS,
     PRESETS,
     describe_presets,
@@ -37,8 +37,8 @@ from fem_anim.presets import (
     parallel_options,
     preset_options,
 )
-from fem_anim.scene import SCHEMA, default_scene_text, load_scene
-from fem_anim.simulation import solver_options
+from fem_anim.scene.schema import SCHEMA, default_scene_text, load_scene
+from fem_anim.simulation.loop import solver_options
 
 SMALL = ["--set", "mesh.element_size=0.1", "--set", "time.steps=2",
          "--set", "output.render=false"]

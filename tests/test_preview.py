@@ -19,9 +19,9 @@ from fem_anim.bench.preview import tip_errors
 from fem_anim.bench.worker import measure
 from fem_anim.cli import main
 from fem_anim.errors import SceneError
-from fem_anim.scene import default_scene_text, load_scene
-from fem_anim.solver import BUDGET_REASON, CONVERGED_REASONS
-from fem_anim.solver_modes import SOLVER_MODES
+from fem_anim.scene.schema import default_scene_text, load_scene
+from fem_anim.solver.minimiser import BUDGET_REASON, CONVERGED_REASONS
+from fem_anim.scene.modes import SOLVER_MODES
 
 STEPS = 20
 #: The preview's tip may stray from the exact run's by this fraction of the largest tip

@@ -1,11 +1,11 @@
 """DOLFINx against the numpy reference, on the same P1 mesh (STYLE rule 12).
 
 Both sides get the cell -> vertex arrays of :func:`fem_anim.reference.box_mesh`: the
-reference assembles over them as they are, DOLFINx after :func:`fem_anim.mesh.mesh_from_arrays`
+reference assembles over them as they are, DOLFINx after :func:`fem_anim.mesh.build.mesh_from_arrays`
 has distributed and reordered them. A DOLFINx dof (geometry node ``i``, component ``c``) is
 mapped to the reference dof ``d * input_index[i] + c`` through
-:attr:`fem_anim.output.VertexGather.node_to_dof` and
-:attr:`fem_anim.mesh.SimplexMesh.input_index`; DOLFINx holds displacements ``u = x - X``, the
+:attr:`fem_anim.output.files.VertexGather.node_to_dof` and
+:attr:`fem_anim.mesh.build.SimplexMesh.input_index`; DOLFINx holds displacements ``u = x - X``, the
 reference positions ``x``.
 
 Compared, in this order:
@@ -39,10 +39,10 @@ from petsc4py import PETSc
 from scenes import DENSITY, DIVISIONS, LENGTHS, POISSON_RATIO, YOUNGS_MODULUS, beam, make_scene
 
 from fem_anim import compat, reference
-from fem_anim.mesh import mesh_from_arrays
-from fem_anim.output import VertexGather
-from fem_anim.problem import EnergyProblem
-from fem_anim.simulation import Simulation
+from fem_anim.mesh.build import mesh_from_arrays
+from fem_anim.output.files import VertexGather
+from fem_anim.problem.objective import EnergyProblem
+from fem_anim.simulation.loop import Simulation
 
 pytestmark = pytest.mark.skipif(
     MPI.COMM_WORLD.size > 1, reason="serial: the numpy reference and the dof map are rank-local"
@@ -119,7 +119,7 @@ def pinned_mask(points: np.ndarray, d: int) -> np.ndarray:
 def step_callbacks(problem, u: np.ndarray) -> tuple[float, np.ndarray, sp.csr_matrix]:
     """g, grad g (pinned rows: u - u_bc) and the Hessian at the displacement ``u`` (local
     dofs) from the callbacks SNES calls: the assembled forms plus the terms assembled once
-    (:mod:`fem_anim.constant_terms`)."""
+    (:mod:`fem_anim.problem.constant_terms`)."""
     work = compat.petsc_vec(problem.u).copy()
     with work.localForm() as local:
         local.array[:] = u
@@ -310,7 +310,7 @@ def test_step_objective(comparison, d, material):
     random predictor ``y``. DOLFINx's gravity potential ``-f_g . u`` differs from the
     reference's ``-f_g . x`` by the constant ``-f_g . X``, times ``w`` in ``g``. The
     callbacks assemble w E_elastic and add the inertia and gravity terms from a mass matrix
-    and a force vector assembled once (:mod:`fem_anim.constant_terms`).
+    and a force vector assembled once (:mod:`fem_anim.problem.constant_terms`).
     """
     c = comparison(d, material)
     ref = reference.build_problem(c.points, c.cells, material, YOUNGS_MODULUS, POISSON_RATIO,

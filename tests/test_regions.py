@@ -1,4 +1,4 @@
-"""Several materials in one body (``[[region]]``, :mod:`fem_anim.region`).
+"""Several materials in one body (``[[region]]``, :mod:`fem_anim.mesh.regions`).
 
 1. **Assembly against the numpy reference** on a two-region box (the reference beam of
    ``tests/test_reference_comparison.py``, cells with centroid x < 0.5 in one region): the
@@ -40,9 +40,9 @@ from test_reference_comparison import (
 
 from fem_anim import reference
 from fem_anim.errors import SceneError
-from fem_anim.mesh import mesh_from_arrays
-from fem_anim.problem import EnergyProblem
-from fem_anim.simulation import Simulation
+from fem_anim.mesh.build import mesh_from_arrays
+from fem_anim.problem.objective import EnergyProblem
+from fem_anim.simulation.loop import Simulation
 
 pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1,
                                 reason="serial: the numpy reference and the dof map are rank-local")

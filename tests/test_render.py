@@ -4,7 +4,7 @@ Two tiny real runs (module fixtures): the hanging beam, coarse, 4 steps, 64x48 p
 and a 2D square in free fall with no pins, whose |u| is the same at every vertex
 (1/2 g t^2), so each frame is one colour: with the colour range fixed over the run the
 colours differ from frame to frame, and with the camera fixed the square moves down the
-picture. Rendering runs in its own process (fem_anim.render); these tests read the
+picture. Rendering runs in its own process (fem_anim.render.process); these tests read the
 pictures back with imageio and imageio-ffmpeg.
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from conftest import clean_environment, fem_anim_command, mpirun_command
 
-from fem_anim.animation import gif_stride
+from fem_anim.render.animation import gif_stride
 from fem_anim.cli import main
 from fem_anim.reference.geometry import cell_volumes, deformation_gradient
 from fem_anim.reference.materials import lame_parameters, psi
@@ -265,8 +265,8 @@ def test_energy_density_p2_sums_to_the_elastic_energy(tmp_path):
 
 def test_plots_mark_retries_and_substeps(tmp_path):
     """stats.csv with a retried, halved step: the plots are drawn from its columns."""
-    from fem_anim.output import STATS_COLUMNS
-    from fem_anim.plots import read_stats, write_plots
+    from fem_anim.output.files import STATS_COLUMNS
+    from fem_anim.render.plots import read_stats, write_plots
 
     rows = [dict.fromkeys(STATS_COLUMNS, 0.0) | {"step": k + 1, "time": t, "dt": dt,
                                                   "retries": r, "newton_its": 3 + r,

@@ -25,7 +25,7 @@ import pytest
 from conftest import clean_environment, fem_anim_command, mpirun_command, process_tree
 
 from fem_anim.cli import main
-from fem_anim.rundir import LOCK, MARKER, install, read_manifest, write_manifest
+from fem_anim.output.rundir import LOCK, MARKER, install, read_manifest, write_manifest
 
 COARSE = ["--set", "mesh.element_size=0.1", "--set", "output.render=false"]
 PREFIX = "fem-anim: error: "
@@ -203,7 +203,7 @@ def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
 
 # -- 1. only fem_anim's own files ------------------------------------------------------------
 def test_render_refuses_a_directory_a_run_holds(tmp_path, capsys):
-    from fem_anim.rundir import claim
+    from fem_anim.output.rundir import claim
 
     out = tmp_path / "run"
     assert main(["run", "-q", *COARSE, "--set", "time.steps=1", "-o", str(out)]) == 0
@@ -416,9 +416,9 @@ def test_edited_checkpoint_is_refused_and_nothing_committed(interrupted, tmp_pat
 
 def test_checkpoint_altered_byte_by_byte(interrupted, capsys):
     """Every altered byte (a spread of positions): refused, or read exactly as written."""
-    from fem_anim.checkpoint import load_checkpoint
-    from fem_anim.scene import load_scene
-    from fem_anim.simulation import Simulation
+    from fem_anim.simulation.checkpoint import load_checkpoint
+    from fem_anim.scene.schema import load_scene
+    from fem_anim.simulation.loop import Simulation
 
     out, original = interrupted
     scene = load_scene(None, COARSE[1::2] + ["time.steps=300", "output.checkpoint_every=1000"])
@@ -492,8 +492,8 @@ def test_body_at_rest_gets_no_relative_figure(tmp_path):
 
 
 def test_newmark_is_never_told_to_use_newmark():
-    from fem_anim.energy import describe_energy
-    from fem_anim.scene import load_scene
+    from fem_anim.simulation.energy_report import describe_energy
+    from fem_anim.scene.schema import load_scene
 
     report = {"drift": -0.2, "max_excursion": 0.2, "exchanged_energy": 1.0,
               "conservative": True, "damped": True, "gained": False, "flagged": True,
@@ -530,7 +530,7 @@ def test_quiet_run_prints_nothing_and_no_bar_off_a_terminal(tmp_path):
 
 
 def test_readme_2d_shape_names_are_scene_names():
-    from fem_anim.scene import MESH_SHAPES
+    from fem_anim.scene.schema import MESH_SHAPES
 
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     row = next(line for line in readme.splitlines() if line.startswith("| `mesh.shape`"))

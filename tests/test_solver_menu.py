@@ -15,8 +15,8 @@ import pytest
 from mpi4py import MPI
 
 from fem_anim.errors import ConvergenceError
-from fem_anim.scene import load_scene
-from fem_anim.simulation import Simulation
+from fem_anim.scene.schema import load_scene
+from fem_anim.simulation.loop import Simulation
 
 SQUASH = """
 name = "squash"

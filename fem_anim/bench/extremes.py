@@ -11,7 +11,7 @@ elements in one step). Its expected outcome is derived from the scene by
 - :data:`FINISHES`: the continuous problem is well posed, the run must complete, either
   ``converges-bounded`` (every step converges at once) or ``recovers-by-substepping``
   (some steps fail, the adaptive stepper halves dt and the run completes,
-  :class:`fem_anim.simulation.AdaptiveStepper`); which of the two is solver behaviour,
+  :class:`fem_anim.simulation.loop.AdaptiveStepper`); which of the two is solver behaviour,
   reported in the table but not expected;
 - ``recovers-by-substepping``: the first step's pin motion alone inverts a layer of
   elements, the full step cannot start, a smaller one can;
@@ -21,7 +21,7 @@ elements in one step). Its expected outcome is derived from the scene by
 
 A completed run is also *bounded*: in a conservative scene (no damping, no moving pins)
 the total energy never exceeds its initial value E_0 by more than
-:data:`ENERGY_GROWTH_BOUND` times the exchanged energy (:mod:`fem_anim.energy`); with
+:data:`ENERGY_GROWTH_BOUND` times the exchanged energy (:mod:`fem_anim.simulation.energy_report`); with
 moving pins (which do work on the body) it stays finite. A case may add its own check:
 the spinning body keeps its volume after half a turn; the stiffest beam (E = 1e9 Pa,
 small strains: nearly linear), released from rest under its weight, never deflects
@@ -46,9 +46,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConvergenceError, FemAnimError, SceneError
-from ..mesh import cell_volumes
-from ..scene import load_scene
+from fem_anim.errors import ConvergenceError, FemAnimError, SceneError
+from fem_anim.mesh.build import cell_volumes
+from fem_anim.scene.schema import load_scene
 
 __all__ = ["Case", "Outcome", "cases", "run_case", "locking_rows", "mixed_locking_rows",
            "format_table", "main", "scene_text", "OUTCOMES", "COMPLETED", "ENERGY_GROWTH_BOUND",
@@ -62,7 +62,7 @@ OUTCOMES = ("converges-bounded", "recovers-by-substepping", "stops-with-message"
 COMPLETED = ("converges-bounded", "recovers-by-substepping", "fails the physical check")
 
 #: Largest rise of the total energy above E_0 in a conservative scene, as a fraction of the
-#: exchanged energy (:func:`fem_anim.energy.energy_report`: the largest of |E_0|, the
+#: exchanged energy (:func:`fem_anim.simulation.energy_report.energy_report`: the largest of |E_0|, the
 #: kinetic energy and the drop of the potential energy over the run). The continuous
 #: system conserves E (kinetic K plus potential P); implicit Euler's step satisfies
 #: M (v_{n+1} - v_n) = -h grad P(x_{n+1}), and for a P convex along the step this gives
@@ -358,8 +358,8 @@ def run_case(case: Case, comm=None, overrides: list[str] = ()) -> Outcome:
     --set`` does (e.g. ``solver.hessian=auto``)."""
     from mpi4py import MPI
 
-    from ..energy import energy_report, initial_energies
-    from ..simulation import AdaptiveStepper, Simulation
+    from fem_anim.simulation.energy_report import energy_report, initial_energies
+    from fem_anim.simulation.loop import AdaptiveStepper, Simulation
 
     comm = comm or MPI.COMM_WORLD
     data = case.keys | {"time": case.keys["time"] | {"steps": case.steps}}
@@ -375,7 +375,7 @@ def run_case(case: Case, comm=None, overrides: list[str] = ()) -> Outcome:
     state, rows = sim.initial_state(), []
     tip = None
     if case.check == "sag":
-        from .measure import PointSampler
+        from fem_anim.bench.measure import PointSampler
 
         tip = PointSampler(sim.domain.mesh, np.array([[1.0, 0.1, 0.1][:sim.problem.d]]))
         deflections = []
@@ -461,8 +461,8 @@ def locking_rows(full: bool = False, comm=None) -> list[dict]:
 
 def _settled_tip(data: dict, comm) -> float:
     """Downward tip deflection after 3 implicit Euler steps of 1 s (the beam at rest)."""
-    from ..simulation import AdaptiveStepper, Simulation
-    from .measure import PointSampler
+    from fem_anim.simulation.loop import AdaptiveStepper, Simulation
+    from fem_anim.bench.measure import PointSampler
 
     scene = _load(data)
     sim = Simulation(scene, comm, {})
@@ -539,7 +539,7 @@ def main(argv: list[str]) -> int:
     """
     from mpi4py import MPI
 
-    from ..console import print_error, quiet_jit_logging
+    from fem_anim.console import print_error, quiet_jit_logging
 
     parser = argparse.ArgumentParser(prog="fem-anim bench --extremes")
     parser.add_argument("--full", action="store_true", help="the 3D grid (minutes)")
@@ -577,7 +577,7 @@ def main(argv: list[str]) -> int:
     if MPI.COMM_WORLD.rank == 0:
         print(table)
         if args.output:
-            from .trade import machine_description
+            from fem_anim.bench.trade import machine_description
 
             stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
             command = " ".join(["fem-anim bench --extremes", *argv])

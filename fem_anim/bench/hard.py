@@ -78,7 +78,7 @@ def run_case(scene_path, overrides, petsc, preset: str, timeout: float = 3600.0)
 def hard_run(scene_path, overrides, out: Path, log=print, h: float = HARD_ELEMENT_SIZE,
              preset: str = "cg-icc") -> str:
     """Run every configuration; the markdown section (also ``out/hard.md``)."""
-    from .report import md_table
+    from fem_anim.bench.report import md_table
 
     body = []
     for label, sets, petsc in CONFIGS:
@@ -129,7 +129,7 @@ def _crushed_cube(model: str, element_size: float) -> dict:
 
 def hard_scenes(reduced: bool = False) -> list[HardScene]:
     """The scenes of the table (``reduced``: coarse, short variants that run in seconds)."""
-    from .extremes import cases
+    from fem_anim.bench.extremes import cases
 
     extreme = {case.name: case for case in cases(full=not reduced)}
     out = []
@@ -155,8 +155,8 @@ def hard_scenes(reduced: bool = False) -> list[HardScene]:
 
 
 def _scene(hard: HardScene, mode: str):
-    from ..scene import load_scene
-    from .extremes import _load
+    from fem_anim.scene.schema import load_scene
+    from fem_anim.bench.extremes import _load
 
     sets = [f'solver.hessian="{mode}"', f"time.steps={hard.steps}", "output.render=false"]
     if hard.data is None:
@@ -176,9 +176,9 @@ def run_scene(hard: HardScene, mode: str, comm=None) -> dict:
     """
     from mpi4py import MPI
 
-    from ..errors import ConvergenceError
-    from ..simulation import AdaptiveStepper, Simulation
-    from ..solver import HESSIAN_KINDS
+    from fem_anim.errors import ConvergenceError
+    from fem_anim.simulation.loop import AdaptiveStepper, Simulation
+    from fem_anim.solver.minimiser import HESSIAN_KINDS
 
     comm = comm or MPI.COMM_WORLD
     scene = _scene(hard, mode)
@@ -205,7 +205,7 @@ def run_scene(hard: HardScene, mode: str, comm=None) -> dict:
 def hessian_table(reduced: bool = False, only: list[str] | None = None,
                   modes: tuple[str, ...] = HESSIAN_MODES, log=print) -> tuple[str, list]:
     """Every hard scene with every Hessian mode; the markdown table and the raw results."""
-    from .report import md_table
+    from fem_anim.bench.report import md_table
 
     results = []
     body = []
@@ -251,8 +251,8 @@ def main(argv: list[str] | None = None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         print(hard_run(args.scene, [], out, h=args.element_size, preset=args.preset))
         return 0
-    from ..console import quiet_jit_logging
-    from .trade import machine_description
+    from fem_anim.console import quiet_jit_logging
+    from fem_anim.bench.trade import machine_description
 
     quiet_jit_logging()
     rank0 = MPI.COMM_WORLD.rank == 0

@@ -22,11 +22,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from mpi4py import MPI
 
-from .. import compat
-from ..energy import energy_report, initial_energies
-from ..errors import ConvergenceError
-from ..mesh import build_mesh
-from ..simulation import AdaptiveStepper, Simulation
+from fem_anim import compat
+from fem_anim.simulation.energy_report import energy_report, initial_energies
+from fem_anim.errors import ConvergenceError
+from fem_anim.mesh.build import build_mesh
+from fem_anim.simulation.loop import AdaptiveStepper, Simulation
 
 __all__ = ["PointSampler", "Measurement", "measure_configuration", "median_run"]
 

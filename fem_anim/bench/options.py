@@ -11,7 +11,7 @@ Every option here is off by default and given as PETSc options (command line or 
 * Eisenstat-Walker forcing ``-snes_ksp_ew``: the Krylov tolerance follows the Newton
   residual instead of ``ksp_rtol`` (iterative presets), with PETSc's parameters and with
   the scene's ``solver.forcing = "adaptive"`` (choice 2 capped at 1e-2,
-  :data:`fem_anim.presets.FORCING`);
+  :data:`fem_anim.solver.presets.FORCING`);
 * storage ``-mat_type aij`` against the Krylov presets' default ``baij`` (d x d blocks);
 * quadrature reduction ``element.quadrature_degree = 1`` for P2 (default 2).
 
@@ -56,9 +56,9 @@ def options_table(scene_path, overrides, out: Path, log=print, h: float = 0.025,
     """Run every case in this process; the markdown section (also ``out/options.md``)."""
     from mpi4py import MPI
 
-    from ..scene import load_scene
-    from .report import md_table
-    from .worker import measure
+    from fem_anim.scene.schema import load_scene
+    from fem_anim.bench.report import md_table
+    from fem_anim.bench.worker import measure
 
     results, body = {}, []
     for label, preset, petsc, sets, baseline in OPTION_CASES:

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FemAnimError
+from fem_anim.errors import FemAnimError
 
 __all__ = ["main", "peer_table", "peer_python", "PEER_VENV"]
 
@@ -75,15 +75,15 @@ FEM_ANIM_CONFIGS = (("fem_anim cholesky", "cholesky", []),
 def _fem_anim(scene, preset: str, steps: int):
     from mpi4py import MPI
 
-    from .worker import measure
+    from fem_anim.bench.worker import measure
 
     r = measure(scene, preset, steps, {}, MPI.COMM_SELF, tip=True)
     return np.array([s["wall"] for s in r["steps"]]), np.array(r["tip"]), r
 
 
 def _reference(domain, scene, steps: int):
-    from .. import reference
-    from ..reference.integrators import implicit_euler_step, initial_state
+    from fem_anim import reference
+    from fem_anim.reference.time_integrators import implicit_euler_step, initial_state
 
     mat = scene["material"]
     points, cells = domain.points, domain.cells
@@ -130,8 +130,8 @@ def compare(scene_path, overrides, h: float, steps: int, python: Path | None, lo
     """Rows [solver, tets, s/step, ratio to fem_anim cholesky, tip error] for one mesh."""
     from mpi4py import MPI
 
-    from ..mesh import build_mesh
-    from ..scene import load_scene
+    from fem_anim.mesh.build import build_mesh
+    from fem_anim.scene.schema import load_scene
 
     settings = [*overrides, *SCENE_SETTINGS, f"mesh.element_size={h}", f"time.steps={steps}"]
     scene = load_scene(scene_path, settings)
@@ -165,7 +165,7 @@ def compare(scene_path, overrides, h: float, steps: int, python: Path | None, lo
 def peer_table(scene_path, overrides, out: Path, log=print, sizes=PEER_SIZES,
                steps: int = 10) -> str:
     """The side-by-side table (also written to ``out/peers.md``)."""
-    from .report import machine_text, md_table
+    from fem_anim.bench.report import machine_text, md_table
 
     python = peer_python()
     rows = []
@@ -200,8 +200,8 @@ def _load() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..console import OneLineParser, print_error
-    from ..petsc_options import init_petsc
+    from fem_anim.console import OneLineParser, print_error
+    from fem_anim.petsc_options import init_petsc
 
     init_petsc([])
 

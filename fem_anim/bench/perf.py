@@ -35,8 +35,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..console import OneLineParser
-from ..errors import FemAnimError
+from fem_anim.console import OneLineParser
+from fem_anim.errors import FemAnimError
 
 __all__ = ["main", "build_parser", "run_config", "DEFAULT_SIZES", "DEFAULT_PRESETS"]
 
@@ -85,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _validate(args) -> None:
-    from ..presets import PRESETS
+    from fem_anim.solver.presets import PRESETS
 
     if args.steps < 1 or args.steps > 1000:
         raise FemAnimError(f"--steps: must be between 1 and 1000, got {args.steps}")
@@ -162,7 +162,7 @@ def sweep(args, petsc: list[str], log=print) -> list[dict]:
 
 
 def is_direct(preset: str) -> bool:
-    from ..presets import PRESETS
+    from fem_anim.solver.presets import PRESETS
 
     return PRESETS[preset].get("pc_type") in ("cholesky", "lu")
 
@@ -175,7 +175,7 @@ def _load() -> str:
 
 
 def _sections(args, petsc, rows, out: Path, log) -> dict:
-    from . import report
+    from fem_anim.bench import report
 
     extra = {}
     if args.blas:
@@ -185,17 +185,17 @@ def _sections(args, petsc, rows, out: Path, log) -> dict:
         log("MPI: serial against mpirun -n 2 on the largest mesh")
         extra["mpi"] = report.mpi_rows(args, petsc, run_config, rows)
     if args.options:
-        from .options import options_table
+        from fem_anim.bench.options import options_table
 
         log("options: lagging, Eisenstat-Walker, BAIJ")
         extra["options"] = options_table(args.scene, args.overrides, out, log)
     if args.hard:
-        from .hard import hard_run
+        from fem_anim.bench.hard import hard_run
 
         log("hard run")
         extra["hard"] = hard_run(args.scene, args.overrides, out, log)
     if args.peers:
-        from .peers import peer_table
+        from fem_anim.bench.peers import peer_table
 
         log("peers")
         extra["peers"] = peer_table(args.scene, args.overrides, out, log)
@@ -204,8 +204,8 @@ def _sections(args, petsc, rows, out: Path, log) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code (2 with one error line for bad input)."""
-    from ..console import print_error
-    from ..petsc_options import init_petsc, split_petsc_args
+    from fem_anim.console import print_error
+    from fem_anim.petsc_options import init_petsc, split_petsc_args
 
     argv = list(sys.argv[1:] if argv is None else argv)
     app_args, solver_options, global_args = split_petsc_args(argv)
@@ -214,8 +214,8 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(app_args)
         _validate(args)
         if args.worker:
-            from ..scene import load_scene
-            from .worker import run_worker
+            from fem_anim.scene.schema import load_scene
+            from fem_anim.bench.worker import run_worker
 
             scene = load_scene(args.scene, args.overrides)
             run_worker(scene, args.preset, args.steps, solver_options, args.worker, args.tip)
@@ -224,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
 
         if MPI.COMM_WORLD.size > 1:
             raise FemAnimError("run the benchmark driver serially; it starts mpirun itself")
-        from . import report
+        from fem_anim.bench import report
 
         petsc = [tok for k, v in solver_options.items() for tok in (f"-{k}", v) if tok]
         out = Path(args.out)

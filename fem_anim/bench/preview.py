@@ -13,7 +13,7 @@ arrays for every solver. Compared, each on its own and one after the other in on
 * fem_anim's fastest exact configuration (``cg-icc``, ``solver.forcing = "adaptive"``), with
   ``solver.hessian = "auto"`` (the bent 60k beam's Hessian is indefinite from t ~ 0.5 s, where
   CG-ICC on the exact Hessian fails: that row is kept to show it);
-* ``solver.mode = "preview"`` (:mod:`fem_anim.solver_modes`) and the other budgets of the
+* ``solver.mode = "preview"`` (:mod:`fem_anim.scene.modes`) and the other budgets of the
   front (:data:`CONFIGS`);
 * pbatoolkit's vertex block descent (Chen et al. 2024) at each of :data:`VBD_SWEEPS` sweeps
   per step (:mod:`fem_anim.bench.pbat_worker`, in pbatoolkit's own virtual environment).
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConvergenceError, FemAnimError
+from fem_anim.errors import ConvergenceError, FemAnimError
 
 __all__ = ["CONFIGS", "FLOOR", "SIZES", "VBD_SWEEPS", "compare", "main", "preview_table",
            "split_rows", "split_text", "tip_errors"]
@@ -83,9 +83,9 @@ def compare(divisions, steps: int, python: Path | None, log=print, configs=CONFI
     mesh; ``splits`` (if given) gets each fem_anim row's mean phase split by (tets, label)."""
     from mpi4py import MPI
 
-    from ..mesh import build_mesh
-    from ..scene import load_scene
-    from .peers import _fem_anim, _pbat
+    from fem_anim.mesh.build import build_mesh
+    from fem_anim.scene.schema import load_scene
+    from fem_anim.bench.peers import _fem_anim, _pbat
 
     keys = [*BEAM, f"mesh.divisions={list(divisions)}", f"time.steps={steps}"]
     scene = load_scene(None, keys)
@@ -145,7 +145,7 @@ def split_rows(splits: dict, labels=(CONFIGS[0][0], CONFIGS[1][0])) -> list[list
     The floor is the step's own Hessian assemblies and preconditioned solves (:data:`FLOOR`);
     the rest is what Newton with a line search adds (residuals, objectives, energies, Python).
     """
-    from .worker import PHASE_COLUMNS
+    from fem_anim.bench.worker import PHASE_COLUMNS
 
     rows = []
     for (tets, label), mean in splits.items():
@@ -164,7 +164,7 @@ def _fem_anim_mpi(overrides: list[str], preset: str, steps: int, ranks: int):
     Raises:
         FemAnimError: if mpirun is missing or the worker failed (its last line is quoted).
     """
-    from .perf import run_config
+    from fem_anim.bench.perf import run_config
 
     r = run_config(None, overrides, preset, steps, ranks=ranks, tip=True)
     return np.array([s["wall"] for s in r["steps"]]), np.array(r["tip"]), r
@@ -173,8 +173,8 @@ def _fem_anim_mpi(overrides: list[str], preset: str, steps: int, ranks: int):
 def preview_table(out: Path, sizes=SIZES, steps: int = 60, log=print,
                   sweeps=VBD_SWEEPS, install: bool = True) -> str:
     """The side-by-side table, also written to ``out/preview.md``."""
-    from .peers import _load, peer_python
-    from .report import machine_text, md_table
+    from fem_anim.bench.peers import _load, peer_python
+    from fem_anim.bench.report import machine_text, md_table
 
     python = peer_python(install)
     load = _load()
@@ -205,8 +205,8 @@ def preview_table(out: Path, sizes=SIZES, steps: int = 60, log=print,
 
 def split_text(splits: dict) -> str:
     """The phase table of the exact rows (serial and under mpirun), as Markdown."""
-    from .report import md_table
-    from .worker import PHASE_COLUMNS
+    from fem_anim.bench.report import md_table
+    from fem_anim.bench.worker import PHASE_COLUMNS
 
     headers = ["solver", "tets", *[f"{k} ms" for k in PHASE_COLUMNS], "ms/step", "its/step",
                "floor ms", "x floor"]
@@ -219,8 +219,8 @@ def split_text(splits: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..console import OneLineParser, print_error
-    from ..petsc_options import init_petsc
+    from fem_anim.console import OneLineParser, print_error
+    from fem_anim.petsc_options import init_petsc
 
     init_petsc([])
 

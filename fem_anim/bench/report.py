@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .timing import growth_exponent
-from .worker import PHASE_COLUMNS
+from fem_anim.bench.timing import growth_exponent
+from fem_anim.bench.worker import PHASE_COLUMNS
 
 __all__ = ["write", "exponent_text", "blas_rows", "mpi_rows", "machine_text", "md_table"]
 

@@ -7,7 +7,7 @@ Every configuration of the swept knobs (:mod:`fem_anim.bench.sweep`) is built, r
 ``--repeats`` times and measured (:mod:`fem_anim.bench.measure`): wall time per
 simulated second (median of the repeats; mesh generation and form compilation reported
 separately), Newton and linear iterations, retries of the adaptive stepper, energy drift
-(:mod:`fem_anim.energy`), and the error against a fine reference run of the same scene:
+(:mod:`fem_anim.simulation.energy_report`), and the error against a fine reference run of the same scene:
 
     e_L2 = sqrt( sum_k sum_p |u(p, t_k) - u_ref(p, t_k)|^2 / sum_k sum_p |u_ref(p, t_k)|^2 )
 
@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..console import OneLineParser
-from ..errors import FemAnimError, SceneError
-from .sweep import expand_study
+from fem_anim.console import OneLineParser
+from fem_anim.errors import FemAnimError, SceneError
+from fem_anim.bench.sweep import expand_study
 
 __all__ = ["main", "build_parser", "trajectory_errors", "machine_description", "COLUMNS"]
 
@@ -120,9 +120,9 @@ def _study(args) -> int:
     if (error := comm.bcast(error, root=0)):
         raise FemAnimError(error)
 
-    from ..console import quiet_jit_logging
-    from ..mesh import build_mesh
-    from .measure import measure_configuration, median_run
+    from fem_anim.console import quiet_jit_logging
+    from fem_anim.mesh.build import build_mesh
+    from fem_anim.bench.measure import measure_configuration, median_run
 
     quiet_jit_logging()
     ref_scene = study.reference.scene
@@ -173,7 +173,7 @@ def _study(args) -> int:
 
 
 def _write_outputs(out, study, rows, keys, points, probe, ref) -> None:
-    from .pareto import pareto_front, pareto_table, plot_pareto, short, write_csv
+    from fem_anim.bench.pareto import pareto_front, pareto_table, plot_pareto, short, write_csv
 
     cost = [r.get("wall_per_sim_s", np.nan) for r in rows]
     err = [r.get("error_l2", np.nan) for r in rows]
@@ -214,7 +214,7 @@ def _write_outputs(out, study, rows, keys, points, probe, ref) -> None:
 
 def main(argv: list[str]) -> int:
     """Run the trade study; returns the exit code (2 and one line for bad input)."""
-    from ..console import print_error
+    from fem_anim.console import print_error
 
     try:
         args = build_parser().parse_args(argv)

@@ -1,6 +1,6 @@
 """One measured configuration: a scene, a preset, a few steps, the phase split of each.
 
-:func:`measure` builds a :class:`~fem_anim.simulation.Simulation` (the library's own code,
+:func:`measure` builds a :class:`~fem_anim.simulation.loop.Simulation` (the library's own code,
 as ``fem-anim run`` does), times the set-up, then advances ``steps`` time steps and
 splits each step's wall time with :class:`~fem_anim.bench.timing.PhaseTimer`. The first
 step is reported on its own (it pays the symbolic factorisation and first-touch costs);
@@ -17,7 +17,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from .timing import PhaseTimer, peak_memory_mb, split_step
+from fem_anim.bench.timing import PhaseTimer, peak_memory_mb, split_step
 
 __all__ = ["PHASE_COLUMNS", "measure", "run_worker"]
 
@@ -40,7 +40,7 @@ def measure(scene, preset: str | None = None, steps: int = 5,
         step 1 if only one), ``peak_mb`` and, with ``tip``, the tip trajectory (mean
         displacement of the vertices at the largest x, rank 0).
     """
-    from ..simulation import Simulation
+    from fem_anim.simulation.loop import Simulation
 
     start = time.perf_counter()
     sim = Simulation(scene, comm, cli_options, preset=preset)

@@ -17,7 +17,7 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 """
 
 from fem_anim.reference.assembly import elastic_energy, elastic_gradient, elastic_hessian
-from fem_anim.reference.contact import (
+from fem_anim.reference.obstacle_barrier import (
     boundary_facets,
     contact_energy,
     contact_gradient,
@@ -33,7 +33,7 @@ from fem_anim.reference.geometry import (
     gradient_operator,
     rest_shape_matrix,
 )
-from fem_anim.reference.integrators import (
+from fem_anim.reference.time_integrators import (
     INTEGRATORS,
     State,
     Trajectory,
@@ -53,9 +53,9 @@ from fem_anim.reference.materials import (
     psi,
     stable_neohookean_parameters,
 )
-from fem_anim.reference.mesh import box_mesh
+from fem_anim.reference.box_mesh import box_mesh
 from fem_anim.reference.newton import ConvergenceError, minimize_newton
-from fem_anim.reference.problem import EnergyProblem, build_problem
+from fem_anim.reference.potential import EnergyProblem, build_problem
 
 __all__ = [
     "INTEGRATORS",

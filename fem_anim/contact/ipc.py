@@ -1,0 +1,342 @@
+"""Contact between surfaces (bodies with each other and with themselves) by the IPC Toolkit.
+
+Incremental Potential Contact (Li et al. 2020) adds to E(x) in the step objective
+g(x) = 1/2 ||x - y||_M^2 + w E(x) (seed eq. 4) the barrier energy
+
+    B(x) = kappa sum_k a_k b(d_k(x)^2, d_hat^2) / d_hat^3,
+    b(s, s_hat) = -(s - s_hat)^2 ln(s / s_hat)   for s < s_hat,  0 beyond,
+
+over the point-triangle and edge-edge pairs k of the boundary surface closer than
+d_hat (ipctk 1.6: ``BarrierPotential(dhat, kappa, use_physical_barrier=True)`` on
+``NormalCollisions`` with ``use_area_weighting``; a_k is the pair's share of the surface
+area, so kappa is a pressure in Pa and B is in J, like the obstacles' barrier of
+:mod:`forms.contact`). B is +inf at contact, so every trial point of the line search is
+kept on the collision-free part of the Newton segment by ipctk's continuous collision
+detection (:meth:`IPCContact.step_bound`): no accepted state has an intersection.
+
+ipctk is serial: this module is the one seam (STYLE rule 16). The surface vertices (P1
+dofs on the exterior facets) are numbered by their global dof block, in order, so each
+rank owns a contiguous run of them; each evaluation gathers their positions x = X + u to
+rank 0, which builds the collision set and evaluates there, then broadcasts scalars and
+sends each rank the gradient entries and Hessian rows it owns. The Hessian is
+projected to PSD per pair (IPC's projection) and dropped on pinned dofs (they are
+Dirichlet rows). Its pattern couples dofs the elastic sparsity does not: the matrix
+accepts new nonzeros (``NEW_NONZERO_ALLOCATION_ERR`` off), which PETSc keeps from then
+on, so only a step meeting new pairs pays for the reallocation.
+
+Stiffness ``"adaptive"`` is IPC's schedule: at each step start ``initial_barrier_stiffness``
+balances the barrier's gradient against w grad E (with ipctk's lower bound from the mass
+and the scene size), never below the value ``update_barrier_stiffness`` left after the
+previous step (it grows kappa while the minimum distance keeps falling); kappa is fixed
+within a step, so the objective is one function during each minimisation.
+
+ipctk runs on one thread: its parallel loops (TBB) sum in an order that changes from run to
+run, which moved Newton counts by one and the states in their last digits between two runs
+of one scene (measured on the two-cubes scene), so a run resumed from a checkpoint could
+not equal the uninterrupted one. One thread makes every run repeat to the last digit.
+"""
+
+from __future__ import annotations
+
+import time
+
+import ipctk
+import numpy as np
+from dolfinx import mesh as dmesh
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fem_anim import compat
+from fem_anim.errors import SceneError
+
+__all__ = ["IPCContact"]
+
+
+class IPCContact:
+    """The barrier of ``[contact]`` on the union mesh's boundary surface.
+
+    Args:
+        cfg: The validated ``[contact]`` table.
+        u: The displacement Function (P1).
+        pinned: Local dof indices (unblocked) held by Dirichlet conditions.
+        body_names: Names of the bodies by marker - 1 (for messages).
+        cell_body: Body index of each local cell.
+
+    Raises:
+        SceneError: (collectively) if two bodies cross or are within ``dhat`` at rest.
+    """
+
+    def __init__(self, cfg: dict, u, pinned: np.ndarray, body_names: list[str],
+                 cell_body: np.ndarray):
+        V = u.function_space
+        mesh = V.mesh
+        self.comm: MPI.Comm = mesh.comm
+        ipctk.set_num_threads(1)  # repeatable sums (module docstring)
+        self.cfg, self.u = cfg, u
+        self.dhat = float(cfg["dhat"])
+        self.gdim = g = mesh.geometry.dim
+        tdim = mesh.topology.dim
+        index_map = V.dofmap.index_map
+        n_owned = index_map.size_local
+        mesh.topology.create_connectivity(tdim - 1, tdim)
+        mesh.topology.create_connectivity(tdim - 1, 0)
+        mesh.topology.create_connectivity(tdim, 0)
+        vertex_dof = np.empty(mesh.topology.index_map(0).size_local
+                              + mesh.topology.index_map(0).num_ghosts, dtype=np.int64)
+        c_to_v = mesh.topology.connectivity(tdim, 0).array.reshape(-1, tdim + 1)
+        vertex_dof[c_to_v.ravel()] = compat.cell_dofs(V)[:, : tdim + 1].ravel()
+        facets = dmesh.exterior_facet_indices(mesh.topology)
+        f_to_v = mesh.topology.connectivity(tdim - 1, 0).array.reshape(-1, tdim)
+        f_to_c = mesh.topology.connectivity(tdim - 1, tdim)
+        local_faces = vertex_dof[f_to_v[facets]]
+        faces = index_map.local_to_global(local_faces.ravel().astype(np.int32)).reshape(
+            -1, tdim)
+        face_body = cell_body[f_to_c.array[f_to_c.offsets[facets]]]
+        start = index_map.local_range[0]
+        ranges = np.asarray(self.comm.allgather(index_map.local_range[1]))
+        gathered = self.comm.gather((faces, face_body), root=0)
+        owned_lists = None
+        if self.comm.rank == 0:
+            faces = np.concatenate([f for f, _ in gathered])
+            self.face_body = np.concatenate([b for _, b in gathered])
+            self.surface = np.unique(faces)  # global blocks, ascending: collision numbering
+            self.faces = np.searchsorted(self.surface, faces).astype(np.int32)
+            self.counts = np.diff(np.searchsorted(self.surface, np.r_[0, ranges]))
+            owned_lists = np.split(self.surface, np.cumsum(self.counts)[:-1])
+        self.blocks = (self.comm.scatter(owned_lists, root=0) - start).astype(np.int64)
+        assert np.all(self.blocks < n_owned)
+        X = V.tabulate_dof_coordinates()[self.blocks, :g]
+        is_pinned = np.zeros(V.dofmap.index_map_bs * (n_owned + index_map.num_ghosts), bool)
+        is_pinned[pinned] = True
+        free = ~is_pinned.reshape(-1, g)[self.blocks]
+        rest, free = self._gather(X), self._gather(free.astype(float))
+        self.timers = {"detection_s": 0.0, "barrier_s": 0.0, "ccd_s": 0.0}
+        # adaptive: 0 until the first step sets it (initial energies: no pair between bodies)
+        self.kappa = float(cfg["stiffness"]) if cfg["stiffness"] != "adaptive" else 0.0
+        self.kappa_floor = 0.0
+        self.weight = 1.0
+        self._distance = np.inf
+        #: IPC's per-pair projection of the Hessian (NONE: the exact Hessian, for tests)
+        self.projection = ipctk.PSDProjectionMethod.CLAMP
+        self.friction = None  # the step's lagged friction potential (rank 0), if any
+        self._x = None
+        self.num_pairs = 0
+        if self.comm.rank == 0:
+            self.free = free.ravel() > 0.5
+            edges = ipctk.edges(self.faces) if tdim == 3 else self.faces
+            F = self.faces if tdim == 3 else np.empty((0, 3), np.int32)
+            self.mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges, np.int32),
+                                            np.asfortranarray(F, np.int32))
+            if not cfg["self"]:
+                self.mesh.can_collide = ipctk.make_connected_components_filter(F)
+            self.potential = ipctk.BarrierPotential(self.dhat, 1.0, True)
+            self.collisions = ipctk.NormalCollisions()
+            self.collisions.use_area_weighting = True
+            self.diagonal = float(np.linalg.norm(np.ptp(rest, axis=0)))
+            self.vertex_body = np.zeros(rest.shape[0], np.int64)
+            self.vertex_body[self.faces.ravel()] = np.repeat(self.face_body, tdim)
+        error = self._check_rest(rest, body_names) if self.comm.rank == 0 else None
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise SceneError(error)
+
+    # -- the MPI seam -------------------------------------------------------------------------
+    def _gather(self, local: np.ndarray) -> np.ndarray | None:
+        """Rows of the owned surface vertices, stacked on rank 0 in collision order."""
+        parts = self.comm.gather(np.ascontiguousarray(local, dtype=float), root=0)
+        return np.concatenate(parts) if self.comm.rank == 0 else None
+
+    def _scatter(self, rows: np.ndarray | None) -> np.ndarray:
+        """Rank 0's per-vertex rows back to the ranks owning the vertices."""
+        parts = np.split(rows, np.cumsum(self.counts)[:-1]) if self.comm.rank == 0 else None
+        return self.comm.scatter(parts, root=0)
+
+    def positions(self, values: np.ndarray | None = None) -> np.ndarray | None:
+        """x = X + u (or ``values``, a local dof array, without X) at the surface, rank 0."""
+        if values is None:
+            u = self.u.x.array.reshape(-1, self.gdim)[self.blocks]
+            x = self._gather(u)
+            return None if x is None else self.mesh.rest_positions + x
+        return self._gather(values.reshape(-1, self.gdim)[self.blocks])
+
+    def _update(self) -> np.ndarray | None:
+        """Gather x and rebuild the collision set when x changed (collective)."""
+        start = time.perf_counter()
+        x = self.positions()
+        if self.comm.rank == 0 and (self._x is None or not np.array_equal(x, self._x)):
+            self.collisions.build(self.mesh, x, self.dhat)
+            self._x = x
+            self.num_pairs = len(self.collisions)
+        self.timers["detection_s"] += time.perf_counter() - start
+        return x
+
+    # -- energy, gradient, Hessian -------------------------------------------------------------
+    def energy(self, friction: bool = True) -> float:
+        """kappa B(x) (+ D(x) with friction) (J) at the current ``u``; +inf at contact."""
+        x = self._update()
+        start = time.perf_counter()
+        value = None
+        if self.comm.rank == 0:
+            value = self.kappa * self.potential(self.collisions, self.mesh, x)
+            if friction and self.friction is not None:
+                value += self.friction(self.tangential, self.mesh, x - self._x_lagged)
+        self.timers["barrier_s"] += time.perf_counter() - start
+        return self.comm.bcast(value, root=0)
+
+    def add_gradient(self, b: PETSc.Vec, scale: float) -> None:
+        """b += scale kappa grad B(x) on the owned surface dofs (collective)."""
+        x = self._update()
+        start = time.perf_counter()
+        grad = None
+        if self.comm.rank == 0:
+            grad = (scale * self.kappa) * self.potential.gradient(
+                self.collisions, self.mesh, x)
+            if self.friction is not None:
+                grad += scale * self.friction.gradient(self.tangential, self.mesh,
+                                                       x - self._x_lagged)
+            grad = grad.reshape(-1, self.gdim)
+        mine = self._scatter(grad)
+        values = b.array.reshape(-1, self.gdim)
+        values[self.blocks] += mine
+        self.timers["barrier_s"] += time.perf_counter() - start
+
+    def add_hessian(self, A: PETSc.Mat, scale: float) -> None:
+        """A += scale kappa Hess B(x)^+ (per-pair PSD projection), rows and columns of
+        pinned dofs left out; A must accept new nonzeros (collective; before assembly)."""
+        x = self._update()
+        start = time.perf_counter()
+        parts = None
+        if self.comm.rank == 0:
+            H = self.kappa * self.potential.hessian(self.collisions, self.mesh, x,
+                                                    self.projection)
+            if self.friction is not None:
+                H = H + self.friction.hessian(self.tangential, self.mesh, x - self._x_lagged,
+                                              self.projection)
+            H = H.tocoo()
+            keep = self.free[H.row] & self.free[H.col]
+            g = self.gdim
+            to_global = lambda i: self.surface[i // g] * g + i % g  # noqa: E731
+            rows, cols = to_global(H.row[keep]), to_global(H.col[keep])
+            vals = scale * H.data[keep]
+            ranges = np.cumsum(self.counts)  # surface vertices per rank, in rank order
+            owner = np.searchsorted(ranges, H.row[keep] // g, side="right")
+            parts = [(rows[owner == r], cols[owner == r], vals[owner == r])
+                     for r in range(self.comm.size)]
+        rows, cols, vals = self.comm.scatter(parts, root=0)
+        if rows.size:
+            order = np.lexsort((cols, rows))
+            rows, cols, vals = rows[order], cols[order], vals[order]
+            unique, first = np.unique(rows, return_index=True)
+            indptr = np.r_[first, rows.size].astype(PETSc.IntType)
+            A.setValuesIJV(indptr, cols.astype(PETSc.IntType), vals,
+                           addv=PETSc.InsertMode.ADD_VALUES,
+                           rowmap=unique.astype(PETSc.IntType))
+        self.timers["barrier_s"] += time.perf_counter() - start
+
+    # -- admissibility ----------------------------------------------------------------------
+    def step_bound(self, y: np.ndarray) -> float:
+        """Largest alpha <= 1 with x - alpha' y collision free for all alpha' <= alpha
+        (ipctk's CCD, with its conservative rescaling); ``y`` a local dof array."""
+        x0 = self._update()
+        dy = self.positions(y)
+        start = time.perf_counter()
+        alpha = float(ipctk.compute_collision_free_stepsize(self.mesh, x0, x0 - dy)) \
+            if self.comm.rank == 0 else None
+        self.timers["ccd_s"] += time.perf_counter() - start
+        return self.comm.bcast(alpha, root=0)
+
+    # -- stiffness schedule -------------------------------------------------------------------
+    def stage(self, weight: float, grad_energy: np.ndarray, average_mass: float,
+              h: float) -> None:
+        """Set kappa (and the lagged friction) for a step of size h with integrator weight
+        w, at the current ``u`` = u_n.
+
+        ``grad_energy`` is grad E on the local dofs; IPC's kappa multiplies a barrier
+        added to the whole objective, ours sits inside w E, so kappa = kappa_IPC / w.
+        """
+        self.weight = weight
+        self.friction = None
+        if self.cfg["stiffness"] == "adaptive":
+            self._adapt(weight, grad_energy, average_mass)
+        if self.cfg["friction"] > 0:
+            self._stage_friction(h)
+
+    def _stage_friction(self, h: float) -> None:
+        """IPC's lagged friction (section 5): normal forces and tangent bases at x_n,
+
+        D(x) = sum_k mu lambda_k f0(|T_k^T (x - x_n)|), f0 smoothed over eps_v h,
+
+        with lambda_k the pair's barrier force kappa |dB_k/dd| (area-weighted, in N).
+        """
+        x = self._update()
+        if self.comm.rank == 0:
+            normal = ipctk.BarrierPotential(self.dhat, self.kappa, True)
+            self.tangential = ipctk.TangentialCollisions()
+            self.tangential.build(self.mesh, x, self.collisions, normal,
+                                  float(self.cfg["friction"]))
+            self.friction = ipctk.FrictionPotential(float(self.cfg["epsv"]) * h)
+            self._x_lagged = x.copy()
+        else:
+            self.friction = True  # rank 0 holds the potential; the others only take part
+
+    def _adapt(self, weight: float, grad_energy: np.ndarray, average_mass: float) -> None:
+        """IPC's adaptive kappa at the step start (module docstring)."""
+        x = self._update()
+        g_energy = self.positions(grad_energy)
+        value = None
+        if self.comm.rank == 0:
+            g_barrier = self.potential.gradient(self.collisions, self.mesh, x)
+            weights = np.mean(self.mesh.vertex_areas) / self.dhat ** 3
+            kappa, self.kappa_max = ipctk.initial_barrier_stiffness(
+                self.diagonal, self.potential.barrier, self.dhat, average_mass / weights,
+                weight * g_energy.ravel(), g_barrier)
+            value = max(kappa, self.kappa_floor)
+            self.kappa_floor = value
+            self._distance = self._min_distance(x)
+        self.kappa_ipc = self.comm.bcast(value, root=0)
+        self.kappa = self.kappa_ipc / weight
+
+    def _min_distance(self, x: np.ndarray) -> float:
+        """Rank 0: the smallest distance of the pairs nearer than d_hat (inf if none)."""
+        return float(self.collisions.compute_minimum_distance(self.mesh, x)) \
+            if self.num_pairs else np.inf
+
+    def state(self) -> dict[str, float]:
+        """What a checkpoint keeps across steps (rank 0's): the adaptive kappa's floor."""
+        return {"kappa_floor": float(self.kappa_floor)}
+
+    def restore(self, state: dict[str, float]) -> None:
+        """Continue from a checkpoint's :meth:`state` (an older one: the floor starts at 0)."""
+        self.kappa_floor = float(state.get("kappa_floor", 0.0))
+
+    def finish_step(self) -> None:
+        """After an accepted step: IPC's update of kappa from the distance's trend."""
+        x = self._update()
+        if self.cfg["stiffness"] != "adaptive" or self.comm.rank != 0:
+            return
+        d = self._min_distance(x)
+        if np.isfinite(d) and np.isfinite(self._distance):
+            self.kappa_floor = ipctk.update_barrier_stiffness(
+                self._distance, d, self.kappa_max, self.kappa_floor, self.diagonal)
+
+    def _check_rest(self, x: np.ndarray, names: list[str]) -> str | None:
+        """Rank 0: no surfaces cross, no two bodies within d_hat at rest (None: fine).
+
+        Pairs of one body within d_hat are legal (a thin part): the barrier is finite there.
+        """
+        self.collisions.build(self.mesh, x, self.dhat)
+        ids = [c.vertex_ids(self.mesh.edges, self.mesh.faces) for c in self.collisions]
+        pairs = {tuple(sorted({int(self.vertex_body[v]) for v in vs if v >= 0})) for vs in ids}
+        between = sorted(p for p in pairs if len(p) == 2)
+        if ipctk.has_intersections(self.mesh, x):
+            if between:
+                a, b = between[0]
+                return (f"at rest, bodies {names[a]!r} and {names[b]!r} intersect; move them "
+                        "apart (body offset)")
+            return "at rest, the bodies' surfaces intersect (a mesh crosses itself)"
+        if between:
+            a, b = between[0]
+            return (f"at rest, bodies {names[a]!r} and {names[b]!r} are closer than "
+                    f"contact.dhat = {self.dhat} m; move them apart (body offset) or reduce "
+                    "contact.dhat")
+        return None

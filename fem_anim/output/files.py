@@ -1,0 +1,326 @@
+"""Run outputs: trajectory, per-step statistics and the final state (rank 0 writes).
+
+Displacements are gathered to rank 0 in the input mesh's vertex order
+(:class:`VertexGather`), so a run under ``mpirun -n N`` writes the same files as a serial
+run. Everything is written into a staging directory ``OUTDIR/.partial`` and moved into
+``OUTDIR`` only when the run succeeds (:class:`RunDirectory`): a failed run leaves no
+file posing as a result, and keeps its staging area for ``--resume``.
+
+Files: ``trajectory.xdmf`` + ``trajectory.h5`` (displacement and cell energy density
+per frame, ParaView and meshio read it), ``stats.csv`` (one row per step), ``final.vtu``
+(point data ``displacement``, cell data ``energy_density``), ``scene.json`` (the validated
+scene) and, from :mod:`fem_anim.render.animation` and :mod:`fem_anim.render.plots`, the pictures in
+:data:`RENDER_PRODUCTS`.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fem_anim import compat
+from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.mesh.build import SimplexMesh
+from fem_anim.output.rundir import (RENDER_PRODUCTS, STAGING, claim, install, read_manifest,
+                     write_atomically)
+
+__all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "TrajectoryWriter",
+           "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS"]
+
+STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
+                 "residual_norm", "initial_residual_norm", "newton_decrement", "shift",
+                 "exact_its", "shift_its", "clamp_its", "abs_its", "kinetic", "elastic",
+                 "gravity", "contact", "total_energy", "assembly_s", "factor_s",
+                 "linear_solve_s", "other_s", "solve_wall_s", "step_wall_s", "contact_s",
+                 "contact_pairs", "residual_ratio", "hessian_assemblies", "factorisations"]
+
+
+class VertexGather:
+    """Collects a vector Function's vertex values on rank 0 in input vertex order."""
+
+    def __init__(self, domain: SimplexMesh, V):
+        mesh = domain.mesh
+        self.comm: MPI.Comm = mesh.comm
+        self.domain = domain
+        tdim = mesh.topology.dim
+        nodes = compat.geometry_dofmap(mesh)
+        num_cells = nodes.shape[0]
+        dofs = compat.cell_dofs(V)[:num_cells, : tdim + 1]
+        node_to_dof = np.empty(mesh.geometry.x.shape[0], dtype=np.int64)
+        node_to_dof[nodes.ravel()] = dofs.ravel()
+        self.node_to_dof = node_to_dof
+        self.input_index = domain.input_index
+        self.bs = V.dofmap.index_map_bs
+        self.num_points = self.comm.bcast(domain.points.shape[0] if self.comm.rank == 0
+                                          else None, root=0)
+
+    def gather(self, values: np.ndarray) -> np.ndarray | None:
+        """Vertex values (num_points, bs) on rank 0, ``None`` elsewhere."""
+        local = values.reshape(-1, self.bs)[self.node_to_dof]
+        parts = self.comm.gather((self.input_index, local), root=0)
+        if self.comm.rank != 0:
+            return None
+        out = np.empty((self.num_points, self.bs))
+        for index, part in parts:
+            out[index] = part
+        return out
+
+
+class CellGather:
+    """Collects per-cell values of the owned cells on rank 0 in input cell order.
+
+    DOLFINx keeps each cell's row in the input array (``topology.original_cell_index``);
+    the owned cells of all ranks together are the input cells, each once.
+    """
+
+    def __init__(self, domain: SimplexMesh):
+        topology = domain.mesh.topology
+        self.comm: MPI.Comm = domain.mesh.comm
+        num_owned = topology.index_map(topology.dim).size_local
+        self.input_index = np.asarray(topology.original_cell_index, np.int64)[:num_owned]
+        self.num_cells = self.comm.bcast(domain.cells.shape[0] if self.comm.rank == 0
+                                         else None, root=0)
+
+    def gather(self, values: np.ndarray) -> np.ndarray | None:
+        """Values of the owned cells (local order) as (num_cells,) on rank 0, else ``None``."""
+        parts = self.comm.gather((self.input_index, values), root=0)
+        if self.comm.rank != 0:
+            return None
+        out = np.empty(self.num_cells)
+        for index, part in parts:
+            out[index] = part
+        return out
+
+
+def _pad3(a: np.ndarray) -> np.ndarray:
+    """ParaView warps and glyphs want 3-vectors: pad 2D arrays with a zero column."""
+    return a if a.shape[1] == 3 else np.hstack([a, np.zeros((a.shape[0], 3 - a.shape[1]))])
+
+
+class RunDirectory:
+    """The output directory with a staging area; only rank 0 touches the file system.
+
+    Claimed (marked and locked, :func:`fem_anim.output.rundir.claim`) at construction; the
+    staging area ``OUTDIR/.partial`` receives every file while the run is in progress
+    and is installed by :meth:`commit` only after success. Nothing ever deletes it on
+    failure: its checkpoint and frames are what ``--resume`` continues. A fresh run
+    refuses a directory whose staging area holds a checkpoint (an unfinished run that
+    could be resumed); one without a checkpoint is only a failed start, and is replaced.
+    Every decision is taken on rank 0 and raised on every rank.
+    """
+
+    def __init__(self, path: Path, comm: MPI.Comm, resume: bool = False):
+        self.path = Path(path)
+        self.comm = comm
+        self.staging = self.path / STAGING
+        self._lock = None
+        error = None
+        if comm.rank == 0:
+            try:
+                self._lock = claim(self.path)
+                self._prepare(resume)
+            except FemAnimError as err:
+                error = str(err)
+            except OSError as err:
+                error = f"output directory {self.path} cannot be written: " \
+                        f"{describe_os_error(err, self.staging)}"
+            if error and self._lock is not None:
+                os.close(self._lock)
+                self._lock = None
+        error = comm.bcast(error, root=0)  # decided on rank 0, raised on every rank
+        if error:
+            raise FemAnimError(error)
+
+    def _prepare(self, resume: bool) -> None:
+        if resume:
+            if not self.staging.is_dir():
+                raise FemAnimError(f"nothing to resume in {self.path}: no unfinished run there")
+            return
+        if (self.staging / "checkpoint.npz").is_file():
+            raise FemAnimError(f"{self.path} holds an unfinished run with a checkpoint: "
+                               f"continue it with --resume {self.path}, or delete "
+                               f"{self.staging} to start again")
+        if self.staging.exists():
+            shutil.rmtree(self.staging)  # a failed start: fem_anim's files only
+        self.staging.mkdir()
+
+    def file(self, name: str) -> Path:
+        """Where to write ``name`` while the run is in progress."""
+        return self.staging / name
+
+    def commit(self) -> None:
+        """Install the staged files (each rename atomic), dropping the checkpoint and the
+        pictures of an older run (:func:`fem_anim.output.rundir.install`); collective."""
+        error = None
+        if self.comm.rank == 0:
+            try:
+                (self.staging / "checkpoint.npz").unlink(missing_ok=True)
+                for leftover in self.staging.glob(".*.tmp"):  # a write cut short
+                    leftover.unlink()
+                owned = read_manifest(self.path)
+                old_pictures = {name for name in owned
+                                if name.split("/")[0] in RENDER_PRODUCTS}
+                install(self.staging, self.path, replaces=old_pictures)
+            except OSError as err:
+                error = f"the run's results cannot be moved into {self.path}: " \
+                        f"{describe_os_error(err, self.staging)}"
+        error = self.comm.bcast(error, root=0)
+        if error:
+            raise FemAnimError(error)
+
+    def close(self) -> None:
+        """Release the directory's lock (also released if the process dies)."""
+        if self._lock is not None:
+            os.close(self._lock)
+            self._lock = None
+
+
+class StatsWriter:
+    """``stats.csv``: one row per completed step, flushed as it is written (rank 0)."""
+
+    def __init__(self, path: Path, comm: MPI.Comm, rows: list[dict] = ()):
+        self.rank0 = comm.rank == 0
+        self.path = Path(path)
+        if self.rank0:
+            self._file = open(path, "w", newline="")
+            self._writer = csv.DictWriter(self._file, fieldnames=STATS_COLUMNS)
+            self._writer.writeheader()
+            for row in rows:  # a resumed run: the rows up to its checkpoint
+                self.write(row)
+
+    def write(self, row: dict) -> None:
+        if self.rank0:
+            # a checkpoint written before a column existed resumes with it empty
+            self._writer.writerow({k: row.get(k, "") for k in STATS_COLUMNS})
+            self._file.flush()
+
+    def close(self) -> None:
+        """Close the file; after a failed write (a full disk) its error was reported."""
+        if self.rank0:
+            try:
+                self._file.close()
+            except OSError:
+                pass
+
+
+class TrajectoryWriter:
+    """``trajectory.xdmf`` + ``.h5``: displacement and energy density per frame (rank 0).
+
+    The layout is meshio's (``data0`` points, ``data1`` cells, ``data{k+2}`` frame k's
+    vertex displacements, plus ``energy_density{k}`` its cells' mean psi), so meshio's
+    TimeSeriesReader and ParaView read it. Each frame is flushed to the HDF5 file
+    and the small XDMF file is rewritten atomically, listing only complete frames: after
+    a kill between frames the pair is readable, and :meth:`reopen` continues it.
+    """
+
+    CELL_TYPES = {3: ("triangle", "Triangle"), 4: ("tetra", "Tetrahedron")}
+
+    def __init__(self, path: Path, domain: SimplexMesh, keep_frames: int | None = None):
+        self.rank0 = domain.mesh.comm.rank == 0
+        self.path = Path(path)
+        self.h5_path = self.path.with_suffix(".h5")
+        self.times: list[float] = []
+        self.h5 = None
+        if not self.rank0:
+            return
+        import h5py
+
+        self.points = _pad3(domain.points)
+        self.cells = domain.cells
+        if keep_frames is None:
+            self.h5 = h5py.File(self.h5_path, "w")
+            self.h5.create_dataset("data0", data=self.points)
+            self.h5.create_dataset("data1", data=self.cells)
+        else:  # continue a run: keep its first frames, drop the rest
+            self.h5 = h5py.File(self.h5_path, "a")
+            stored = self.h5.attrs.get("times", np.zeros(0))
+            if len(stored) < keep_frames or any(f"data{k + 2}" not in self.h5
+                                                for k in range(keep_frames)):
+                self.h5.close()
+                self.h5 = None
+                raise OSError(0, f"holds {len(stored)} frames where the checkpoint expects "
+                              f"{keep_frames} (the run cannot be continued from it)",
+                              str(self.h5_path))
+            self.times = [float(t) for t in stored[:keep_frames]]
+            for k in range(keep_frames, len(self.h5.attrs["times"])):
+                del self.h5[f"data{k + 2}"]
+                if f"energy_density{k}" in self.h5:
+                    del self.h5[f"energy_density{k}"]
+            self._sync()
+
+    def write(self, time: float, displacement: np.ndarray | None,
+              energy_density: np.ndarray | None) -> None:
+        """Append a frame: vertex displacements (input order) and cell energy densities."""
+        if not self.rank0:
+            return
+        k = len(self.times)
+        self.h5.create_dataset(f"energy_density{k}", data=energy_density)
+        self.h5.create_dataset(f"data{k + 2}", data=_pad3(displacement))
+        self.times.append(time)
+        self._sync()
+
+    def _sync(self) -> None:
+        self.h5.attrs["times"] = np.asarray(self.times)
+        self.h5.flush()
+        write_atomically(self.path, self._xdmf().encode())
+
+    def _xdmf(self) -> str:
+        h5 = self.path.with_suffix(".h5").name
+        n, m = self.points.shape[0], self.cells.shape[0]
+        topology = self.CELL_TYPES[self.cells.shape[1]][1]
+        mesh = ('xpointer(//Grid[@Name=&quot;mesh&quot;]/*[self::Topology or '
+                'self::Geometry])')
+        frames = "".join(
+            f'<Grid><xi:include xpointer="{mesh}" /><Time Value="{t!r}" />'
+            f'<Attribute Name="displacement" AttributeType="Vector" Center="Node">'
+            f'<DataItem DataType="Float" Dimensions="{n} 3" Format="HDF" Precision="8">'
+            f"{h5}:/data{k + 2}</DataItem></Attribute>"
+            f'<Attribute Name="energy_density" AttributeType="Scalar" Center="Cell">'
+            f'<DataItem DataType="Float" Dimensions="{m}" Format="HDF" Precision="8">'
+            f"{h5}:/energy_density{k}</DataItem></Attribute></Grid>"
+            for k, t in enumerate(self.times))
+        return (
+            '<Xdmf xmlns:xi="http://www.w3.org/2003/XInclude" Version="3.0"><Domain>'
+            '<Grid Name="TimeSeries_fem_anim" GridType="Collection" CollectionType="Temporal">'
+            f'{frames}</Grid><Grid Name="mesh" GridType="Uniform"><Geometry GeometryType="XYZ">'
+            f'<DataItem DataType="Float" Dimensions="{n} 3" Format="HDF" Precision="8">'
+            f'{h5}:/data0</DataItem></Geometry><Topology TopologyType="{topology}" '
+            f'NumberOfElements="{m}"><DataItem DataType="Int" Dimensions="{m} '
+            f'{self.cells.shape[1]}" Format="HDF" Precision="8">{h5}:/data1</DataItem>'
+            "</Topology></Grid></Domain></Xdmf>\n")
+
+    def close(self) -> None:
+        """Close the HDF5 file; after a failed write (a full disk) its error was reported."""
+        if self.rank0 and self.h5 is not None:
+            try:
+                self.h5.close()
+            except (OSError, RuntimeError):
+                pass
+
+
+def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None,
+                energy_density: np.ndarray | None = None) -> None:
+    """``final.vtu``: the input mesh with point data ``displacement`` and cell data
+    ``energy_density`` (rank 0)."""
+    if domain.mesh.comm.rank != 0:
+        return
+    import meshio
+
+    cell_type = {2: "triangle", 3: "tetra"}[domain.points.shape[1]]
+    cell_data = {} if energy_density is None else {"energy_density": [energy_density]}
+    meshio.write(path, meshio.Mesh(_pad3(domain.points), [(cell_type, domain.cells)],
+                                   point_data={"displacement": _pad3(displacement)},
+                                   cell_data=cell_data))
+
+
+def write_scene(path: Path, scene, comm: MPI.Comm) -> None:
+    """``scene.json``: the validated scene of the run, for ``fem-anim render`` (rank 0)."""
+    if comm.rank == 0:
+        write_atomically(path, (json.dumps({"source": scene.source, "scene": scene.data},
+                                           indent=1) + "\n").encode())

@@ -1,0 +1,280 @@
+"""A saved run as pictures: PNG frames, an animated GIF, an MP4 video, ``final.png``.
+
+:func:`render_directory` reads a run directory (``trajectory.xdmf`` + ``.h5`` through
+meshio's TimeSeriesReader, ``stats.csv``), fixes the colour range and the camera over the
+whole run (the field's range over all frames, the box around all deformed positions), so
+neither colours nor framing jump between frames, renders every frame with one
+:class:`~fem_anim.render.frames.FrameRenderer` and writes
+
+* ``frames/frame_NNNN.png`` (one per trajectory frame, the rest state first),
+* ``animation.gif`` (Pillow, one palette; at most 50 frames per second, since GIF delays are whole
+  hundredths of a second and viewers slow down shorter ones: faster runs keep every
+  k-th frame),
+* ``animation.mp4`` (H.264 through the ffmpeg binary of imageio-ffmpeg),
+* ``final.png`` (the last frame) and the plots of :mod:`fem_anim.render.plots`.
+
+Everything is written into ``OUTDIR/.rendering`` and moved into place at the end. Runs in
+the rendering process only (see :mod:`fem_anim.render.process`), never beside DOLFINx.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fem_anim.errors import FemAnimError
+from fem_anim.render.frames import FrameRenderer, body_labels
+from fem_anim.output.rundir import install, read_manifest
+
+__all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
+           "render_directory", "REQUIRED_FILES", "MAX_GIF_FPS"]
+
+#: What a finished run directory holds before it is rendered.
+REQUIRED_FILES = ("trajectory.xdmf", "trajectory.h5", "stats.csv")
+#: GIF frame delays are hundredths of a second; browsers treat 0.01 s as 0.1 s.
+MAX_GIF_FPS = 50.0
+#: Default frame rate bounds when ``render.fps`` is not given (real time otherwise).
+DEFAULT_FPS_RANGE = (1.0, 60.0)
+
+
+@dataclass
+class RunFrames:
+    """A run's trajectory on the input mesh: rank-0 arrays in input order."""
+
+    points: np.ndarray  # (n, d) rest positions
+    cells: np.ndarray  # (m, d + 1)
+    times: np.ndarray  # (k,)
+    displacement: np.ndarray  # (k, n, d)
+    energy_density: np.ndarray | None  # (k, m), None for a run written without it
+
+
+def check_run_directory(path: Path) -> None:
+    """A directory ``fem-anim run`` finished: exists, and holds :data:`REQUIRED_FILES`.
+
+    Raises:
+        FemAnimError: naming the directory and what is missing.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FemAnimError(f"run directory {path} does not exist")
+    if not path.is_dir():
+        raise FemAnimError(f"{path} is not a run directory (it is a file)")
+    missing = [name for name in REQUIRED_FILES if not (path / name).is_file()]
+    if not missing:
+        return
+    if (path / ".partial").is_dir():
+        raise FemAnimError(f"{path} holds an unfinished run (no {missing[0]} yet; its frames "
+                           f"are in {path / '.partial'}): finish it with `fem-anim run SCENE "
+                           f"--resume {path}`")
+    if len(missing) == len(REQUIRED_FILES):
+        raise FemAnimError(f"{path} is not a fem-anim run directory (no "
+                           f"{', '.join(REQUIRED_FILES)})")
+    raise FemAnimError(f"run directory {path} is incomplete: {', '.join(missing)} missing")
+
+
+def read_run(path: Path) -> RunFrames:
+    """Read ``trajectory.xdmf`` with meshio; every frame finite.
+
+    Raises:
+        FemAnimError: if the trajectory cannot be read, is empty or holds NaN or inf.
+    """
+    import meshio
+
+    source = Path(path) / "trajectory.xdmf"
+    try:
+        with meshio.xdmf.TimeSeriesReader(str(source)) as reader:
+            points, blocks = reader.read_points_cells()
+            frames = [reader.read_data(k) for k in range(reader.num_steps)]
+    except Exception as err:  # meshio raises anything from KeyError to XML parse errors
+        raise FemAnimError(f"{source} cannot be read: {type(err).__name__}: {err}") from None
+    if not frames or len(blocks) != 1 or blocks[0].type not in ("triangle", "tetra"):
+        raise FemAnimError(f"{source} holds no frames of one triangle or tetrahedron mesh")
+    d = 3 if blocks[0].type == "tetra" else 2
+    cells = np.asarray(blocks[0].data)
+    displacement = np.stack([np.asarray(f[1]["displacement"])[:, :d] for f in frames])
+    psi = None
+    if all("energy_density" in f[2] for f in frames):
+        psi = np.stack([np.ravel(f[2]["energy_density"][0]) for f in frames])
+    times = np.array([f[0] for f in frames], dtype=float)
+    for name, array in (("time", times), ("displacement", displacement),
+                        ("energy_density", psi)):
+        if array is not None and not np.all(np.isfinite(array)):
+            raise FemAnimError(f"{source}: {name} holds NaN or inf")
+    return RunFrames(np.asarray(points)[:, :d], cells, times, displacement, psi)
+
+
+def frame_values(run: RunFrames, field: str) -> np.ndarray:
+    """The colour field per frame: |u| per vertex (k, n), psi per cell (k, m), or the body
+    number per cell (k, m).
+
+    Raises:
+        FemAnimError: if the run has no energy density (written by an older fem-anim).
+    """
+    if field == "displacement":
+        return np.linalg.norm(run.displacement, axis=2)
+    if field == "body":
+        return np.broadcast_to(body_labels(run.cells), (run.times.size, run.cells.shape[0]))
+    if run.energy_density is None:
+        raise FemAnimError('render.color_by = "energy_density": this run\'s trajectory has no '
+                           "energy_density field; run the scene again")
+    return run.energy_density
+
+
+def gif_stride(fps: float) -> int:
+    """Keep every k-th frame in the GIF so that it plays at most :data:`MAX_GIF_FPS`."""
+    return max(1, math.ceil(fps / MAX_GIF_FPS - 1e-9))
+
+
+def _frame_rate(settings: dict, times: np.ndarray) -> float:
+    if settings.get("fps"):
+        return float(settings["fps"])
+    if times.size < 2:
+        return DEFAULT_FPS_RANGE[0]
+    real_time = 1.0 / float(np.median(np.diff(times)))
+    return float(np.clip(real_time, *DEFAULT_FPS_RANGE))
+
+
+def _even(image: np.ndarray) -> np.ndarray:
+    """Pad to even width and height (H.264's 4:2:0 chroma needs them) by repeating edges."""
+    h, w = image.shape[:2]
+    return np.pad(image, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
+
+
+def render_directory(path: Path, settings: dict) -> dict:
+    """Render the run in ``path`` as configured by ``settings`` (the ``[render]`` table).
+
+    Returns:
+        What was made: ``frames`` rendered, ``seconds_per_frame``, ``fps``, ``gif_frames``.
+
+    Raises:
+        FemAnimError: for a directory that is not a finished run, or a field it lacks.
+    """
+    from fem_anim.render.plots import write_plots
+
+    path = Path(path)
+    check_run_directory(path)
+    run = read_run(path)
+    staging = path / ".rendering"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir()
+    try:
+        made = _render_frames(run, settings, staging, _run_name(path), _obstacles(path))
+        write_plots(path / "stats.csv", staging)
+        _move_into_place(staging, path)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    print(f"rendered {made['frames']} frames ({made['seconds_per_frame']:.3f} s per frame, "
+          f"{made['size']} pixels, {made['fps']:.4g} frames/s) into {path}", flush=True)
+    return made
+
+
+def _bounds(run: RunFrames) -> np.ndarray:
+    """(xmin, xmax, ymin, ymax, zmin, zmax) around the rest shape and every frame's."""
+    x = np.concatenate([run.points[None], run.points[None] + run.displacement])
+    x = x.reshape(-1, x.shape[2])
+    bounds = np.ravel(np.column_stack([x.min(axis=0), x.max(axis=0)]))
+    return np.concatenate([bounds, np.zeros(6 - bounds.size)])
+
+
+def _obstacles(path: Path) -> list[dict]:
+    """The run's ``[[obstacle]]`` tables (from ``scene.json``; none if it cannot be read)."""
+    import json
+
+    try:
+        return list(json.loads((path / "scene.json").read_text())["scene"]["obstacle"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+
+
+def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
+                   obstacles: list[dict] = ()) -> dict:
+    """Frames, GIF, MP4 and final.png into ``staging``, one renderer for all frames."""
+    import imageio.v3 as iio
+    import imageio_ffmpeg
+
+    values = frame_values(run, settings["color_by"])
+    clim = (min(0.0, float(values.min())), float(values.max()))
+    fps = _frame_rate(settings, run.times)
+    stride = gif_stride(fps)
+    outputs = set(settings["outputs"])
+    last = run.times.size - 1
+    order = range(last + 1) if outputs else [last]  # no outputs: final.png only
+    width = max(4, len(str(last)))
+    if "frames" in outputs:
+        (staging / "frames").mkdir()
+    renderer = FrameRenderer(run.points, run.cells, settings, clim, _bounds(run), obstacles)
+    video, gif = None, []
+    start = time.perf_counter()
+    try:
+        for k in order:
+            image = renderer.render(run.displacement[k], values[k],
+                                    f"{name}  t = {run.times[k]:.3f} s")
+            if "frames" in outputs:
+                iio.imwrite(staging / "frames" / f"frame_{k:0{width}d}.png", image)
+            if "gif" in outputs and k % stride == 0:
+                gif.append(image)
+            if "mp4" in outputs:
+                frame = np.ascontiguousarray(_even(image))
+                if video is None:
+                    video = _video_writer(staging / "animation.mp4", frame.shape, fps,
+                                          imageio_ffmpeg)
+                video.send(frame)
+        iio.imwrite(staging / "final.png", image)
+        seconds = (time.perf_counter() - start) / len(order)
+    finally:
+        renderer.close()
+        if video is not None:
+            video.close()
+    if gif:
+        _write_gif(staging / "animation.gif", gif, 1000.0 * stride / fps)
+    return {"frames": len(order), "seconds_per_frame": seconds, "fps": fps,
+            "gif_frames": len(gif), "size": f"{image.shape[1]}x{image.shape[0]}"}
+
+
+def _write_gif(path: Path, images: list[np.ndarray], duration_ms: float) -> None:
+    """An endlessly looping GIF with one palette for all frames.
+
+    The palette (255 colours, median cut) is taken from the first, middle and last
+    frames together: no colour flicker between frames, and 5-10 times faster than
+    quantising every frame on its own.
+    """
+    from PIL import Image
+
+    sample = np.vstack([images[0], images[len(images) // 2], images[-1]])
+    palette = Image.fromarray(sample).quantize(colors=255, method=Image.Quantize.MEDIANCUT)
+    frames = [Image.fromarray(image).quantize(palette=palette, dither=Image.Dither.NONE)
+              for image in images]
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=duration_ms,
+                   loop=0)
+
+
+def _video_writer(path: Path, shape: tuple[int, ...], fps: float, imageio_ffmpeg):
+    writer = imageio_ffmpeg.write_frames(
+        str(path), (shape[1], shape[0]), fps=fps, codec="libx264", pix_fmt_out="yuv420p",
+        quality=7, macro_block_size=2, ffmpeg_log_level="error")
+    writer.send(None)  # start ffmpeg
+    return writer
+
+
+def _run_name(path: Path) -> str:
+    import json
+
+    try:
+        return json.loads((path / "scene.json").read_text())["scene"]["name"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return path.resolve().name
+
+
+def _move_into_place(staging: Path, path: Path) -> None:
+    """Replace the run's old pictures by the new ones (each rename atomic). Only what this
+    rendering made again is replaced (``frames/`` as a whole, when it made frames: an older
+    rendering's surplus frames go); a user's own files (notes in ``frames/``) are kept
+    (:func:`fem_anim.output.rundir.install`)."""
+    made = {item.name for item in staging.iterdir()}
+    old = {name for name in read_manifest(path) if name.split("/")[0] in made}
+    install(staging, path, replaces=old)

@@ -1,0 +1,92 @@
+"""Rendering in its own process: a run's pictures, or one file's.
+
+:func:`render_run` (frames, GIF, MP4, final.png and plots of a run directory:
+:func:`fem_anim.render.animation.render_directory`) and :func:`render_file` (one ``.vtu`` to a
+PNG: :func:`fem_anim.render.frames.render_vtu`) start ``python -m fem_anim.render.process``: the
+VTK wheel's C++ runtime clashes with libraries DOLFINx loads (std::regex in VTK's scalar
+bar aborts in a process that has imported dolfinx), and a separate process also lets a
+saved run be re-rendered without simulating again (``fem-anim render OUTDIR``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from fem_anim.render.animation import render_directory
+from fem_anim.errors import FemAnimError
+from fem_anim.render.frames import render_vtu
+
+__all__ = ["render_file", "render_run"]
+
+
+def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
+    """``python -m fem_anim.render.process ARGS`` outside the MPI job (see the module docstring).
+
+    Raises:
+        FemAnimError: the renderer's one-line message, if it rejected its input (exit 2).
+        RuntimeError: with the renderer's error output if it failed otherwise.
+    """
+    env = dict(os.environ)
+    for key in [k for k in env if k.startswith(("OMPI_", "PMIX_", "PMI_"))]:
+        del env[key]  # the renderer is not part of the MPI job
+    proc = subprocess.run([sys.executable, "-m", "fem_anim.render.process", *args],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    message = proc.stderr.strip()
+    if proc.returncode == 2 and message.startswith("fem-anim: error: "):
+        raise FemAnimError(message.splitlines()[-1].removeprefix("fem-anim: error: "))
+    if proc.returncode != 0:
+        last = message.splitlines()[-1] if message else f"exit code {proc.returncode}"
+        raise RuntimeError(f"rendering failed: {last}")
+    return proc
+
+
+def render_file(vtu: Path, png: Path, title: str = "", settings: dict | None = None) -> None:
+    """Render ``vtu`` to ``png`` in a fresh Python process."""
+    _run_renderer([str(vtu), str(png), "--title", title,
+                   "--settings", json.dumps(settings or {})])
+    if not Path(png).is_file():
+        raise RuntimeError(f"rendering {vtu} wrote no {png}")
+
+
+def render_run(path: Path, settings: dict, quiet: bool = True) -> None:
+    """Pictures of the run in ``path`` (frames, GIF, MP4, final.png, plots), in a fresh
+    Python process (:func:`fem_anim.render.animation.render_directory`).
+
+    Raises:
+        FemAnimError: naming what is missing or wrong in ``path``.
+        RuntimeError: if rendering failed otherwise.
+    """
+    proc = _run_renderer(["--run", str(path), "--settings", json.dumps(settings)])
+    if not quiet and proc.stdout:
+        print(proc.stdout, end="", flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m fem_anim.render.process VTU PNG`` or ``python -m fem_anim.render.process --run OUTDIR``."""
+    parser = argparse.ArgumentParser(prog="python -m fem_anim.render.process")
+    parser.add_argument("files", nargs="*", metavar="VTU PNG")
+    parser.add_argument("--run", metavar="OUTDIR", help="render a run directory")
+    parser.add_argument("--title", default="")
+    parser.add_argument("--settings", default="{}", help="the [render] table as JSON")
+    args = parser.parse_args(argv)
+    settings = json.loads(args.settings)
+    try:
+        if args.run:
+            render_directory(Path(args.run), settings)
+        elif len(args.files) == 2:
+            render_vtu(Path(args.files[0]), Path(args.files[1]), args.title, settings)
+        else:
+            parser.error("give VTU PNG, or --run OUTDIR")
+    except FemAnimError as err:
+        print(f"fem-anim: error: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

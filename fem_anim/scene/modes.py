@@ -1,0 +1,98 @@
+"""``solver.mode``: named sets of solver keys, the trade of accuracy for speed in one word.
+
+A mode fills the ``[solver]`` keys a scene (or ``--set``) did not give; every key given
+explicitly still wins, as does ``--solver`` on the command line. ``"exact"`` (the default)
+fills ``hessian = "auto"`` (Newton's exact Hessian until it is indefinite: README "Hessian
+modes on hard steps"): Newton to the residual test of the preset (seed section 3.2, eq. 10).
+
+``"preview"`` is one Newton step per time step, accepted unconverged when it decreased the
+step objective (``max_iterations = 1``, ``on_budget = "accept"``: the linearly implicit step
+of Baraff and Witkin, seed eq. 10 taken once from the predictor), solved by conjugate
+gradients with incomplete Cholesky (``cg-icc``) to a relative residual of 1e-4 (``[solver.petsc]
+ksp_rtol``), with ``hessian = "auto"``. One Newton step is ~1e-3 from the converged step, so
+solving its linear system to the preset's 1e-10 buys nothing: on the 11 520-tetrahedron beam
+1e-4 takes 25 CG iterations per step instead of 58 for the same tip (1e-3: 18, with a tip 13 %
+further off). ``auto`` keeps the exact Hessian and filters it only where CG meets negative
+curvature: a bent 60k-tetrahedron beam's Hessian is indefinite from t ~ 0.5 s, where CG on the
+exact Hessian alone fails and the step with it.
+
+It was chosen from the speed/accuracy front of the trade study (README "A preview faster and
+better than VBD"; ``python -m fem_anim.bench.preview``): on the peers' beam of 11 520
+tetrahedra it runs about 2.5x faster than the fastest exact configuration, with the tip within
+~1e-3 of the exact trajectory, where pbatoolkit's VBD at 20 sweeps is both slower and tens of
+percent off. Every step it accepts without meeting the residual test is marked in stats.csv
+(reason 7, ``residual_ratio``), so the inexactness is visible. A mixed (u, p) scene keeps its
+saddle-point preset and exact Hessian; a scene whose regions use several material models, or
+that names another ``method`` or a ``hessian_update``, keeps the exact Hessian in either mode
+(``auto`` filters one model's tangent, and a kept Hessian is never filtered).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fem_anim.petsc_options import flatten_options
+
+__all__ = ["SOLVER_MODES", "apply_solver_mode"]
+
+#: ``solver.mode`` -> the ``[solver]`` keys it fills when the scene leaves them out.
+SOLVER_MODES: dict[str, dict[str, Any]] = {
+    "exact": {"hessian": "auto"},
+    "preview": {"max_iterations": 1, "on_budget": "accept", "preset": "cg-icc",
+                "hessian": "auto", "petsc": {"ksp_rtol": 1e-4}},
+}
+
+
+def apply_solver_mode(raw: dict[str, Any]) -> None:
+    """Fill ``raw["solver"]`` (a parsed, not yet validated scene) from its ``mode``.
+
+    Leaves anything malformed to the validator (an unknown mode, a non-table).
+    """
+    solver = raw.setdefault("solver", {})
+    mode = solver.get("mode", "exact") if isinstance(solver, dict) else None  # schema default
+    if not isinstance(mode, str) or mode not in SOLVER_MODES:
+        return
+    element = raw.get("element")
+    mixed = isinstance(element, dict) and element.get("formulation") == "mixed"
+    keep_exact = mixed or solver.get("method", "newton") != "newton" or \
+        solver.get("hessian_update", "every_iteration") != "every_iteration" or \
+        _several_models(raw)
+    for key, value in SOLVER_MODES[mode].items():
+        if key == "preset" and mixed:
+            continue  # the saddle point needs ldlt, lu or schur (fem_anim.problem.mixed_space)
+        if key == "hessian" and keep_exact:
+            continue
+        if key == "petsc":
+            _fill_petsc(solver, value)
+            continue
+        solver.setdefault(key, value)
+
+
+def _fill_petsc(solver: dict[str, Any], options: dict[str, Any]) -> None:
+    """Add the mode's PETSc options the scene's ``[solver.petsc]`` does not set (flattened:
+    ``ksp = {rtol = ...}`` sets ``ksp_rtol`` too)."""
+    table = solver.setdefault("petsc", {})
+    if not isinstance(table, dict):
+        return  # the validator names it
+    given = flatten_options(table)
+    for name, value in options.items():
+        if name not in given:
+            table[name] = value
+
+
+def _several_models(raw: dict[str, Any]) -> bool:
+    """Whether the scene's bodies or regions use more than one material model (raw scene
+    tables; a body without a model counts as the default one)."""
+    bodies = raw.get("body") if isinstance(raw.get("body"), list) else [raw]
+    models = set()
+    for body in bodies:
+        if not isinstance(body, dict):
+            continue
+        material = body.get("material")
+        model = material.get("model") if isinstance(material, dict) else None
+        models.add(model if isinstance(model, str) else None)  # else: the validator names it
+        regions = body.get("region")
+        if isinstance(regions, list) and any(isinstance(r, dict) and "model" in r
+                                             for r in regions):
+            return True
+    return len(models) > 1

@@ -1,0 +1,32 @@
+"""The time loop (seed section 3.1): integrators' predictors and updates, the initial state,
+adaptive retries, checkpoints and resume, interrupts, the progress bar and the energy report.
+"""
+
+from fem_anim.lazy_exports import lazy_exports
+
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "Checkpoint": "checkpoint",
+    "load_checkpoint": "checkpoint",
+    "save_checkpoint": "checkpoint",
+    "scene_hash": "checkpoint",
+    "DAMPED_THRESHOLD": "energy_report",
+    "ROUNDOFF_STRAIN": "energy_report",
+    "describe_energy": "energy_report",
+    "energy_report": "energy_report",
+    "initial_energies": "energy_report",
+    "moving_pins": "energy_report",
+    "write_summary": "energy_report",
+    "center_of_mass": "initial_state",
+    "initial_velocity": "initial_state",
+    "rigid_velocity": "initial_state",
+    "Integrator": "integrators",
+    "State": "integrators",
+    "Interrupts": "interrupt",
+    "SIGNALS": "interrupt",
+    "stop_at_once": "interrupt",
+    "AdaptiveStepper": "loop",
+    "RunResult": "loop",
+    "Simulation": "loop",
+    "solver_options": "loop",
+    "Progress": "progress",
+})

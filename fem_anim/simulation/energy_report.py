@@ -1,0 +1,207 @@
+"""Energy behaviour of a run: drift of the total energy and numerical damping.
+
+An undamped scene whose pins do not move conserves the total energy
+E = T + Psi + V_gravity exactly in continuous time. Implicit Euler dissipates it
+(seed section 3.1: its step objective adds no energy-conserving correction, so a large
+step damps the motion away), Newmark (trapezoidal) conserves it up to the nonlinear
+solver's tolerance, symplectic Euler keeps it bounded. :func:`energy_report` measures
+this from a run's statistics rows, so a user sees when a large step has damped the
+motion away.
+
+The scale is the energy exchanged in the motion: the largest drop of the potential
+energy below its initial value, max_t (E_0 - Psi(t) - V(t)), or the largest kinetic
+energy, whichever is larger (for a beam released from rest both are the swing energy).
+The drift is (E_end - E_0) / scale, the excursion max_t |E(t) - E_0| / scale. When the
+scale is below the round-off of the energies (E_Young |Omega| 1e-12, a strain of 1e-6: a
+body at rest), no relative figure is given. Damping and friction only remove energy: a
+gain is flagged for every scene without moving pins, a loss only for a conservative one.
+
+Newmark and contact. The trapezoidal rule (seed eq. 3) conserves the energy of quadratic
+potentials; its velocity update v_{n+1} = v_n + h/2 (a_n + a_{n+1}) lets the force at the
+start of a step act over half of the step. The IPC barrier's force is large at the deepest
+point of an impact and zero one step later, when the body has left the barrier's range:
+the half-step impulse h/2 a_n then accelerates a body the barrier no longer holds, with no
+potential energy paying for it. Measured (a 0.2 x 0.2 x 0.1 m block, E = 1e5 Pa,
+dhat = 3 mm, kappa = 1e4 Pa, dt = 0.01 s, frictionless): the total energy stays within
+0.1 J of 6.2 J in flight and jumps to 11.6 J over the two steps of the impact; on
+``demos/jelly_cube.toml`` (element size 0.1) the frictionless cube gains 11 % at
+dt = 0.01 s, 76 % at 0.0025 s and 43 % at 0.001 s: a smaller step does not cure it.
+Lagged friction (IPC: pressure and tangent from the step's start) adds to it by the same
+mechanism (the previous step's friction force acts after the slip has turned; 25 % instead
+of 11 % with mu = 0.5 on the jelly cube at dt = 0.01 s), and moves the energy up as well as
+down while sliding. It is inherent to the scheme, not a defect of the friction term, which
+is dissipative within its own step (convex, minimal at zero slip): under BDF2 the same
+scenes (jelly cube with and without friction, the sliding block) never rise above their
+initial energy. A Newmark run with obstacles that gains energy is
+flagged with this explanation (:data:`NEWMARK_CONTACT`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from fem_anim.mesh.bodies import body_pins
+
+__all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
+           "DAMPED_THRESHOLD", "ROUNDOFF_STRAIN", "moving_pins"]
+
+#: A run that lost (gained) more than this fraction of the exchanged energy is flagged
+#: as damped (as gaining energy).
+DAMPED_THRESHOLD = 0.05
+#: Energies below E_Young * volume * ROUNDOFF_STRAIN^2 are the solver's round-off, not
+#: motion: no relative figure is computed from them (a body at rest has no "drift").
+ROUNDOFF_STRAIN = 1.0e-6
+
+
+#: Why a Newmark run with contact gains energy (module docstring, "Newmark and contact").
+NEWMARK_CONTACT = ("newmark's trapezoidal rule v_{n+1} = v_n + h/2 (a_n + a_{n+1}) applies "
+                   "the contact (and friction) force of a step's start over half of the next "
+                   "step, after the contact has released or the slip has turned: an impulse "
+                   "no energy paid for; a smaller time.dt does not cure it: use bdf2 or "
+                   "implicit_euler for contact")
+
+
+def moving_pins(scene) -> bool:
+    """Whether any pin of ``scene`` moves (a handle): it then works on the body."""
+    return any(p["velocity"] is not None or p["angular_velocity"] != 0
+               for _, _, p in body_pins(scene))
+
+
+def _volume(domain) -> float:
+    """|Omega| from the input mesh on rank 0 (simplex volumes |det(x_i - x_0)| / d!)."""
+    if domain.mesh.comm.rank != 0:
+        return domain.mesh.comm.bcast(None, root=0)
+    x = domain.points[domain.cells]
+    edges = x[:, 1:, :] - x[:, :1, :]
+    d = edges.shape[1]
+    volume = float(np.sum(np.abs(np.linalg.det(edges))) / math.factorial(d))
+    return domain.mesh.comm.bcast(volume, root=0)
+
+
+def initial_energies(sim) -> dict[str, float]:
+    """Kinetic, elastic, gravitational and total energy of ``sim``'s initial state, and
+    ``roundoff``: the energy below which a figure is round-off (:data:`ROUNDOFF_STRAIN`)."""
+    state = sim.initial_state()
+    p = sim.problem
+    p.u.x.array[:] = state.u
+    p.v.x.array[:] = state.v
+    energies = p.energies()
+    young = sim.scene["material"]["youngs_modulus"]
+    energies["roundoff"] = young * _volume(sim.domain) * ROUNDOFF_STRAIN**2
+    return energies
+
+
+def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
+    """Energy drift of a run (see the module docstring).
+
+    Args:
+        rows: The run's statistics rows (``kinetic``, ``elastic``, ``gravity``,
+            ``total_energy`` per step).
+        initial: Energies of the initial state (:func:`initial_energies`).
+        scene: The scene; damping or moving pins make the energy not conserved.
+
+    Returns:
+        A dictionary with ``initial_energy``, ``final_energy``, ``exchanged_energy``,
+        ``drift`` (signed, relative; None when the exchanged energy is at round-off
+        level), ``max_excursion`` (relative, or None), ``conservative`` (whether the
+        scene conserves energy: no damping, friction or moving pin), ``damped`` (a
+        conservative scene that lost more than :data:`DAMPED_THRESHOLD` of the exchanged
+        energy), ``gained`` (a scene without moving pins that gained as much: damping and
+        friction only dissipate), ``flagged`` (either) and ``friction_newmark`` (lagged
+        friction under the trapezoidal rule, which does not keep the energy at impacts:
+        see the module docstring).
+        ``unconverged_steps`` lists the steps kept at the round-off floor of the objective
+        without meeting their stopping test (``snes_reason`` =
+        :data:`fem_anim.solver.minimiser.POLISH_FAILED_REASON`); ``budget_steps`` those accepted
+        at their iteration budget without meeting it (``solver.on_budget = "accept"``,
+        :data:`fem_anim.solver.minimiser.BUDGET_REASON`).
+    """
+    # here: importing PETSc waits for init_petsc
+    from fem_anim.solver.minimiser import BUDGET_REASON, POLISH_FAILED_REASON
+
+    e0 = initial["total_energy"]
+    potential0 = initial["elastic"] + initial["gravity"]
+    exchanged = max([abs(e0)] + [r["kinetic"] for r in rows]
+                    + [potential0 - r["elastic"] - r["gravity"] for r in rows])
+    friction = any(ob["friction"] > 0 for ob in scene["obstacle"]) or \
+        ("contact" in scene.data and scene["contact"]["friction"] > 0)
+    moving = moving_pins(scene)
+    conservative = not scene.damped and not friction and not moving
+    e_end = rows[-1]["total_energy"] if rows else e0
+    drift = excursion = None
+    if exchanged > initial.get("roundoff", 0.0):
+        drift = (e_end - e0) / exchanged
+        excursion = max(abs(r["total_energy"] - e0) for r in rows) / exchanged if rows else 0.0
+    damped = conservative and drift is not None and drift < -DAMPED_THRESHOLD
+    # damping and friction only take energy away: a gain is flagged for them too
+    gained = not moving and drift is not None and drift > DAMPED_THRESHOLD
+    return {"initial_energy": e0, "final_energy": e_end, "exchanged_energy": exchanged,
+            "drift": drift, "max_excursion": excursion, "conservative": conservative,
+            "damped": damped, "gained": gained, "flagged": damped or gained,
+            "friction_newmark": friction and scene["time"]["integrator"] == "newmark",
+            "unconverged_steps": [int(r["step"]) for r in rows
+                                  if r.get("snes_reason") == POLISH_FAILED_REASON],
+            "budget_steps": [int(r["step"]) for r in rows
+                             if r.get("snes_reason") == BUDGET_REASON]}
+
+
+def _contact(scene) -> bool:
+    """Whether the scene has contact: obstacles, or contact between bodies."""
+    return bool(scene["obstacle"]) or "contact" in scene.data
+
+
+def describe_energy(report: dict, scene) -> str:
+    """One line for the terminal: the drift, and a warning for a gain or a loss that the
+    scene does not explain, with advice only where it applies."""
+    integrator = scene["time"]["integrator"]
+    unconverged = report.get("unconverged_steps") or []
+    unmet = (f"; {len(unconverged)} step(s) stopped at the round-off floor without meeting "
+             f"the stopping test (first: step {unconverged[0]})") if unconverged else ""
+    budget = report.get("budget_steps") or []
+    if budget:
+        unmet += (f"; {len(budget)} step(s) accepted at the iteration budget "
+                  f"(solver.max_iterations) without meeting the stopping test "
+                  f"(first: step {budget[0]})")
+    if report["drift"] is None:
+        return (f"no energy exchanged above round-off ({report['exchanged_energy']:.3g} J): "
+                f"the body stayed at rest{unmet}")
+    pct = 100.0 * report["drift"]
+    base = (f"energy drift {pct:+.3g} % of the exchanged energy "
+            f"({report['exchanged_energy']:.4g} J), max excursion "
+            f"{100.0 * report['max_excursion']:.3g} %{unmet}")
+    if report["damped"]:
+        # newmark gains energy at impacts (NEWMARK_CONTACT): not advised for contact
+        advice = "a smaller time.dt" if integrator == "newmark" or _contact(scene) else \
+            "newmark or a smaller time.dt"
+        return (base + f"; numerical damping: {integrator} with this time step damped away "
+                f"{-pct:.3g} % of the energy (use {advice} to keep the motion)")
+    if report["gained"]:
+        if _contact(scene) and integrator == "newmark":
+            why = NEWMARK_CONTACT + (" (lagged friction adds to it)"
+                                     if report["friction_newmark"] else "")
+        else:
+            why = "the time step or the solver tolerance: use a smaller time.dt"
+        return base + f"; energy GAINED {pct:.3g} %, not conserved by the scheme: {why}"
+    if not report["conservative"]:
+        return base + " (not conserved by design: damping, friction or moving pins)"
+    return base
+
+
+def write_summary(path: Path, scene, rows: list[dict], report: dict,
+                  provenance: dict | None = None) -> None:
+    """``summary.json``: steps, final time, retries, iterations and the energy report, then
+    ``provenance`` (software versions, PETSc options, wall time: :mod:`fem_anim.output.provenance`)."""
+    summary = {
+        "scene": scene.name, "integrator": scene["time"]["integrator"],
+        "dt": scene["time"]["dt"], "steps": len(rows),
+        "final_time": rows[-1]["time"] if rows else 0.0,
+        "retries": sum(r.get("retries", 0) for r in rows),
+        "newton_its": sum(r["newton_its"] for r in rows),
+        "linear_its": sum(r["linear_its"] for r in rows),
+        "energy": report,
+    } | (provenance or {})
+    Path(path).write_text(json.dumps(summary, indent=2) + "\n")

@@ -1,0 +1,99 @@
+"""Signals during a run: stop at the next frame, collectively, keeping everything.
+
+SIGINT (Ctrl-C), SIGTERM and SIGHUP do not kill a run in the middle of a write. The
+handler only notes the signal; the time loop asks :meth:`Interrupts.pending` once per
+frame, an ``allreduce`` so that every rank stops at the same frame (``mpirun`` forwards
+SIGINT and SIGTERM to every rank, not necessarily at the same moment), writes a
+checkpoint there, and raises :class:`~fem_anim.errors.Interrupted`. A second signal
+does not wait for the frame to end: it raises at once (the last periodic checkpoint
+and the frames so far stay on disk either way; nothing is deleted).
+
+A launcher that dies without forwarding a signal (``mpirun`` killed with SIGKILL; OpenMPI 5
+also puts every rank in a process group of its own, so a signal to the launcher's group
+does not reach them) would leave its ranks running on their own, holding the run's files.
+Each rank of a parallel run therefore notes its parent process when the run starts and
+counts a change of parent (the launcher gone, the rank adopted) as SIGHUP, the hang-up of
+its controlling process: the ranks stop at the same frame, checkpointed and resumable.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+
+from mpi4py import MPI
+
+from fem_anim.errors import Interrupted
+
+__all__ = ["Interrupts", "SIGNALS", "stop_at_once"]
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class _Handlers:
+    """Installs ``self._handle`` for :data:`SIGNALS` while in use (main thread only; the
+    handlers in force before are put back on exit)."""
+
+    def __init__(self):
+        self._previous: dict[int, object] = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for signum in SIGNALS:
+                self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous.clear()
+
+    def _handle(self, signum: int, frame) -> None:
+        raise NotImplementedError
+
+
+class Interrupts(_Handlers):
+    """Context manager: a signal of :data:`SIGNALS` is noted, and every rank stops at the
+    end of the same frame (:meth:`pending`); a second one raises at once."""
+
+    def __init__(self, comm: MPI.Comm):
+        super().__init__()
+        self.comm = comm
+        self.received: int | None = None
+        self._parent: int | None = None  # a parallel run's launcher (or its daemon)
+
+    def __enter__(self) -> Interrupts:
+        if self.comm.size > 1:
+            self._parent = os.getppid()
+        return super().__enter__()
+
+    def _handle(self, signum: int, frame) -> None:
+        if self.received is not None:  # the second signal: stop now
+            raise Interrupted(f"interrupted by {signal.Signals(signum).name} (twice)", signum)
+        self.received = signum
+
+    def pending(self) -> int | None:
+        """The signal every rank stops for, or None (collective: call once per frame)."""
+        if self.received is None and self._parent is not None and \
+                os.getppid() != self._parent:
+            self.received = signal.SIGHUP  # the launcher is gone
+        mine = self.received if self.received is not None else 0
+        signum = self.comm.allreduce(mine, op=MPI.MAX)
+        return signum or None
+
+
+class stop_at_once(_Handlers):
+    """Context manager: during set-up (meshing, compiling forms) a signal of :data:`SIGNALS`
+    raises :class:`~fem_anim.errors.Interrupted` at once.
+
+    There is nothing to keep yet, but a compile killed by SIGTERM, or stopped by SIGINT's
+    KeyboardInterrupt (a BaseException FFCx does not clean up after), would leave FFCx's
+    lock file in the JIT cache, and every later run would wait for it and fail. FFCx
+    releases its lock on an Exception, which :class:`Interrupted` is (see also
+    :func:`fem_anim.compat.jit_locks_released`).
+    """
+
+    def _handle(self, signum: int, frame) -> None:
+        raise Interrupted(f"interrupted by {signal.Signals(signum).name} while setting up "
+                          "(nothing to keep yet)", signum)
