@@ -31,7 +31,7 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem_anim.forms import obstacle_contact as contact
+from fem_anim.forms import obstacle_contact as contact_forms
 
 from fem_anim import compat
 from fem_anim.errors import SceneError
