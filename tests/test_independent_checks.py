@@ -92,7 +92,7 @@ def test_reference_friction_gradient_by_finite_differences():
     # central differences of a C^2 function: error O(h^2) ~ 1e-10 of g.v, round-off ~1e-8
     assert (D[1] - D[0]) / (2 * h) == pytest.approx(g @ v, rel=1e-6)
     # and the closed form at y = 0 (f1(y)/y -> 2/eps) and across y = eps: f0 is C^1 there
-    f0, f1_over_y = reference.contact.smoothed_slip(np.array([0.0, eps * (1 - 1e-9),
+    f0, f1_over_y = reference.obstacle_barrier.smoothed_slip(np.array([0.0, eps * (1 - 1e-9),
                                                               eps * (1 + 1e-9)]), eps)
     assert f0[0] == pytest.approx(eps / 3) and f1_over_y[0] == pytest.approx(2 / eps)
     assert f0[1] == pytest.approx(f0[2], rel=1e-8)
