@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.errors import ConvergenceError, FemAnimError, SceneError
-from fem_anim.mesh.build import cell_volumes
+from fem_anim.mesh.checks import cell_volumes
 from fem_anim.scene.schema import load_scene
 
 __all__ = ["Case", "Outcome", "cases", "run_case", "locking_rows", "mixed_locking_rows",

@@ -26,7 +26,8 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_anim.errors import MeshError, SceneError
-from fem_anim.mesh.build import SimplexMesh, build_mesh, mesh_arrays, mesh_from_arrays
+from fem_anim.mesh.build import build_mesh, mesh_arrays
+from fem_anim.mesh.simplex import SimplexMesh, mesh_from_arrays
 
 __all__ = ["body_regions", "body_pins", "build_scene_mesh", "rotation_matrix"]
 
