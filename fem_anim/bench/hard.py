@@ -108,7 +108,7 @@ class HardScene:
     """One hard scene: its name, how to build it, the preset, and the frames to run."""
 
     name: str
-    data: dict | None  # a scene dictionary (extremes.scene_text); None: the default scene
+    data: dict | None  # a scene dictionary (extreme_cases.scene_text); None: the default scene
     overrides: tuple[str, ...] = ()
     preset: str | None = None
     steps: int = 60
@@ -129,7 +129,7 @@ def _crushed_cube(model: str, element_size: float) -> dict:
 
 def hard_scenes(reduced: bool = False) -> list[HardScene]:
     """The scenes of the table (``reduced``: coarse, short variants that run in seconds)."""
-    from fem_anim.bench.extremes import cases
+    from fem_anim.bench.extreme_cases import cases
 
     extreme = {case.name: case for case in cases(full=not reduced)}
     out = []
@@ -156,7 +156,7 @@ def hard_scenes(reduced: bool = False) -> list[HardScene]:
 
 def _scene(hard: HardScene, mode: str):
     from fem_anim.scene.schema import load_scene
-    from fem_anim.bench.extremes import _load
+    from fem_anim.bench.extreme_cases import load_case_scene
 
     sets = [f'solver.hessian="{mode}"', f"time.steps={hard.steps}", "output.render=false"]
     if hard.data is None:
@@ -164,7 +164,7 @@ def _scene(hard: HardScene, mode: str):
     data = {k: (dict(v) if isinstance(v, dict) else v) for k, v in hard.data.items()}
     data["solver"] = dict(data.get("solver", {}), hessian=mode)
     data["time"] = dict(data["time"], steps=hard.steps)
-    return _load(data)
+    return load_case_scene(data)
 
 
 def run_scene(hard: HardScene, mode: str, comm=None) -> dict:
