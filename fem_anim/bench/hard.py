@@ -77,7 +77,7 @@ def run_case(scene_path, overrides, petsc, preset: str, timeout: float = 3600.0)
 
 def hard_run(scene_path, overrides, out: Path, log=print, h: float = HARD_ELEMENT_SIZE,
              preset: str = "cg-icc") -> str:
-    """Run every configuration; the markdown section (also ``out/hard.md``)."""
+    """Run every configuration; the markdown section (also ``out/plain_newton.md``)."""
     from fem_anim.bench.report import md_table
 
     body = []
@@ -95,7 +95,7 @@ def hard_run(scene_path, overrides, out: Path, log=print, h: float = HARD_ELEMEN
             "complete `fem-anim run`.\n\n"
             + md_table(["configuration", "finished", "t reached, s", "Newton its", "retries",
                         "wall s", "outcome"], body))
-    (out / "hard.md").write_text(text + "\n", encoding="utf-8")
+    (out / "plain_newton.md").write_text(text + "\n", encoding="utf-8")
     return text
 
 
@@ -243,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--modes", default=",".join(HESSIAN_MODES), help="comma-separated modes")
     p.add_argument("--element-size", type=float, default=HARD_ELEMENT_SIZE)
     p.add_argument("--preset", default="cg-icc")
-    p.add_argument("--out", default="demos/results")
+    p.add_argument("--out", default="demos/results/hard")
     p.add_argument("-o", "--output", help="also write the table to this markdown file")
     args = p.parse_args(argv)
     if args.plain:

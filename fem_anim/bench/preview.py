@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sweeps", default=",".join(map(str, VBD_SWEEPS)))
     p.add_argument("--no-install", action="store_true",
                    help="do not install pbatoolkit if it is missing (compare fem_anim only)")
-    p.add_argument("--out", default="demos/results")
+    p.add_argument("--out", default="demos/results/preview")
     try:
         args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
         try:
