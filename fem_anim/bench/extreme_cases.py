@@ -45,8 +45,8 @@ OUTCOMES = ("converges-bounded", "recovers-by-substepping", "stops-with-message"
 COMPLETED = ("converges-bounded", "recovers-by-substepping", "fails the physical check")
 
 #: Largest rise of the total energy above E_0 in a conservative scene, as a fraction of the
-#: exchanged energy (:func:`fem_anim.simulation.energy_report.energy_report`: the largest of |E_0|, the
-#: kinetic energy and the drop of the potential energy over the run). The continuous
+#: exchanged energy (:func:`fem_anim.simulation.energy_report.energy_report`: the largest of
+#: |E_0|, the kinetic energy and the drop of the potential energy over the run). The continuous
 #: system conserves E (kinetic K plus potential P); implicit Euler's step satisfies
 #: M (v_{n+1} - v_n) = -h grad P(x_{n+1}), and for a P convex along the step this gives
 #: K_{n+1} + P_{n+1} + 1/2 ||v_{n+1} - v_n||_M^2 <= K_n + P_n (it only loses energy);
@@ -90,7 +90,19 @@ def scene_text(data: dict) -> str:
 
 
 def beam_scene(dim: int, full: bool, size=None, es=None, gravity=True, **sections) -> dict:
-    """A cantilever (pinned at x = 0) of 1 x 0.2 (x 0.2) m, neo-Hookean, E = 1e5 Pa."""
+    """The scene dictionary of a cantilever pinned at x = 0: 1 x 0.2 (x 0.2) m, E = 1e5 Pa.
+
+    Args:
+        dim: 2 or 3.
+        full: Element size 0.05 m (the full grid) instead of 0.1 m, unless ``es`` is given.
+        size: The box's size (m), default the beam's.
+        es: Element size (m).
+        gravity: Whether gravity (-9.81 m/s^2 along the last axis) acts.
+        **sections: Scene tables merged into (a dict) or replacing (a list) the defaults.
+
+    Returns:
+        A scene dictionary for :func:`scene_text` / :func:`load_case_scene`.
+    """
     size = size or ([1.0, 0.2, 0.2][:dim])
     data = {"name": "extreme",
             "mesh": {"dim": dim, "size": size, "element_size": es or (0.05 if full else 0.1)},
@@ -290,8 +302,17 @@ def sag_bound(youngs_modulus: float, poisson_ratio: float, dim: int, length: flo
 
 
 def load_case_scene(data: dict, overrides: list[str] = ()):
-    """Validate a scene dictionary exactly as a file, with ``--set KEY=VALUE`` overrides
-    (each rank reads its own copy)."""
+    """Validate a scene dictionary exactly as a file, with ``--set KEY=VALUE`` overrides.
+
+    The dictionary is written as TOML (:func:`scene_text`) to a temporary file and loaded
+    by :func:`fem_anim.scene.schema.load_scene` (each rank reads its own copy).
+
+    Returns:
+        The validated scene.
+
+    Raises:
+        SceneError: as for a scene file with a bad key or value.
+    """
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "case.toml"
         path.write_text(scene_text(data))

@@ -165,9 +165,10 @@ def locking_rows(full: bool = False, comm=None) -> list[dict]:
     for nu in (0.3, 0.4999):
         deflection = {}
         for label, degree, size in (("P1", 1, es), ("P2", 2, es), ("fine P2", 2, es / 2)):
-            data = beam_scene(d, full, es=size, material={"youngs_modulus": 1e7, "poisson_ratio": nu},
-                         element={"degree": degree},
-                         time={"dt": 1.0, "steps": 3, "integrator": "implicit_euler"})
+            data = beam_scene(d, full, es=size,
+                              material={"youngs_modulus": 1e7, "poisson_ratio": nu},
+                              element={"degree": degree},
+                              time={"dt": 1.0, "steps": 3, "integrator": "implicit_euler"})
             deflection[label] = _settled_tip(data, comm)
         e_eff = 1e7 / (1 - nu ** 2) if d == 2 else 1e7
         beam_theory = 3 * 1000.0 * 9.81 / (2 * e_eff * 0.2 ** 2)
@@ -212,9 +213,11 @@ def mixed_locking_rows(full: bool = False, comm=None) -> list[dict]:
     for nu in (0.49, 0.499, 0.4999, 0.5):
         deflection = {}
         for label, size in (("P2/P1 mixed", es), ("fine", es / 2)):
-            data = beam_scene(d, full, es=size, material={"youngs_modulus": 1e7, "poisson_ratio": nu},
-                         element={"degree": 2, "formulation": "mixed"}, solver={"preset": "ldlt"},
-                         time={"dt": 1.0, "steps": 3, "integrator": "implicit_euler"})
+            data = beam_scene(d, full, es=size,
+                              material={"youngs_modulus": 1e7, "poisson_ratio": nu},
+                              element={"degree": 2, "formulation": "mixed"},
+                              solver={"preset": "ldlt"},
+                              time={"dt": 1.0, "steps": 3, "integrator": "implicit_euler"})
             deflection[label] = _settled_tip(data, comm)
         e_eff = 1e7 / (1 - nu ** 2) if d == 2 else 1e7
         rows.append({"nu": nu, "element": "P2/P1 mixed", "deflection": deflection["P2/P1 mixed"],

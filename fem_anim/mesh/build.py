@@ -14,7 +14,8 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_anim.errors import MeshError
-from fem_anim.mesh.checks import cell_volumes  # noqa: F401 (fem_anim.problem.objective imports it from here)
+# fem_anim.problem.objective imports cell_volumes from here
+from fem_anim.mesh.checks import cell_volumes  # noqa: F401
 from fem_anim.mesh.gmsh_session import gmsh_arrays, gmsh_session
 from fem_anim.mesh.mesh_file import read_mesh_file
 from fem_anim.mesh.simplex import SimplexMesh, mesh_from_arrays
@@ -24,7 +25,11 @@ __all__ = ["build_mesh", "mesh_arrays"]
 
 
 def _build_gmsh(cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """Mesh ``cfg["shape"]`` with its builder, given the whole ``[mesh]`` table."""
+    """Mesh ``cfg["shape"]`` with its builder of :data:`fem_anim.meshes.BUILDERS` (rank 0).
+
+    Raises:
+        MeshError: if the builder refuses the table or gmsh fails.
+    """
     from fem_anim.meshes import BUILDERS
 
     source = f"mesh ({cfg['shape']})"
@@ -39,9 +44,18 @@ def _build_gmsh(cfg: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
 
 def mesh_arrays(cfg: dict, base_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict,
                                                      str]:
-    """Vertices, simplices, cell markers, their names and a description of one ``[mesh]``
-    table (rank 0): a mesh file (relative to ``base_dir``), a structured box
-    (``divisions``: :func:`fem_anim.meshes.structured.structured_box`) or a gmsh builder.
+    """The arrays of one ``[mesh]`` table, made on the calling rank (rank 0).
+
+    A mesh file (relative to ``base_dir``), a structured box (``divisions``:
+    :func:`fem_anim.meshes.structured.structured_box`) or a gmsh builder.
+
+    Args:
+        cfg: The validated ``[mesh]`` table.
+        base_dir: The scene file's folder, against which a relative ``file`` is resolved.
+
+    Returns:
+        ``(points, cells, markers, marker names, description)``; the description names
+        the mesh in error messages.
 
     Raises:
         MeshError: if the mesh cannot be read or made.
@@ -59,6 +73,14 @@ def mesh_arrays(cfg: dict, base_dir: Path) -> tuple[np.ndarray, np.ndarray, np.n
 
 def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
     """Build the scene's mesh on rank 0 and distribute it (collective).
+
+    Args:
+        comm: The communicator of the run.
+        scene: The validated scene (its ``[mesh]`` table and ``base_dir``).
+
+    Returns:
+        The distributed mesh; it is one connected body
+        (:func:`fem_anim.mesh.connectivity.check_one_body`).
 
     Raises:
         MeshError: on every rank if the mesh cannot be made or fails :func:`check_cells`.

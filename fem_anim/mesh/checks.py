@@ -64,7 +64,18 @@ def _signed_measures(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
 
 
 def cell_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """Signed volume (area in 2D) of each affine simplex ``points[cells]`` (vectorised)."""
+    """Signed volume (area in 2D) of each affine simplex ``points[cells]``.
+
+    ``det[X_1 - X_0, ..., X_d - X_0] / d!``: positive for a cell whose vertices are in
+    counter-clockwise (right-handed) order.
+
+    Args:
+        points: ``(n, d)`` vertex coordinates.
+        cells: ``(m, d + 1)`` vertex indices.
+
+    Returns:
+        ``(m,)`` signed volumes.
+    """
     return _signed_measures(points, cells) / math.factorial(cells.shape[1] - 1)
 
 
@@ -77,6 +88,11 @@ def check_cells(points: np.ndarray, cells: np.ndarray, source: str) -> None:
     has more than two cells; and no cell is inverted, i.e. folded over the neighbour across
     one of its facets (both on the same side of it). Mixed vertex orders are fine: DOLFINx
     integrates with ``|det J|`` (module docstring).
+
+    Args:
+        points: ``(n, d)`` vertex coordinates, ``d`` 2 or 3.
+        cells: ``(m, d + 1)`` vertex indices.
+        source: What the mesh is, for the message (e.g. the file).
 
     Raises:
         MeshError: naming the offending cell (or vertex) and what is wrong with it.

@@ -22,14 +22,23 @@ __all__ = ["gmsh_arrays", "gmsh_session"]
 
 @contextlib.contextmanager
 def gmsh_session(source: str, hint: str):
-    """An initialised, quiet, single-threaded gmsh; its failures become :class:`MeshError`.
+    """An initialised, quiet, single-threaded gmsh model, finalised on exit.
 
-    The message names ``source``, gmsh's own error and ``hint``, the likely cause. The
-    SIGINT handler in force before is put back afterwards: gmsh sets SIGINT to the default
-    action (4.8 when imported, 4.13 in ``initialize``) and 4.13's ``finalize`` does not
-    restore it (the handler it saves lands in a local variable), which left a run that
-    pressed Ctrl-C while compiling its forms killed outright instead of stopped cleanly
-    (fem_anim.simulation.interrupt).
+    The SIGINT handler in force before is put back afterwards: gmsh sets SIGINT to the
+    default action (4.8 when imported, 4.13 in ``initialize``) and 4.13's ``finalize`` does
+    not restore it, so without this a Ctrl-C later in the run would kill the process instead
+    of stopping it cleanly (:mod:`fem_anim.simulation.interrupt`).
+
+    Args:
+        source: What is being meshed, for the message (e.g. ``mesh (beam)``).
+        hint: The likely cause of a gmsh failure, appended to the message.
+
+    Yields:
+        ``gmsh.model``, for a builder to fill and mesh.
+
+    Raises:
+        MeshError: when gmsh fails inside the block, naming ``source``, gmsh's own error
+            and ``hint``. A :class:`MeshError` raised inside passes through unchanged.
     """
     sigint = signal.getsignal(signal.SIGINT)  # before the import: gmsh 4.8 sets it there
     import gmsh
@@ -56,7 +65,19 @@ def gmsh_session(source: str, hint: str):
 
 
 def gmsh_arrays(model, dim: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """Vertices, simplices, physical-group markers and group names of a meshed gmsh model."""
+    """Vertices, simplices, physical-group markers and group names of a meshed gmsh model.
+
+    Only the linear simplices of dimension ``dim`` that belong to a physical group are
+    taken; points no such cell uses are dropped.
+
+    Args:
+        model: A meshed ``gmsh.model``.
+        dim: 2 (triangles) or 3 (tetrahedra).
+
+    Returns:
+        ``(points (n, dim), cells (m, dim + 1), markers (m,), names)``, ``markers`` being
+        each cell's physical group tag and ``names`` the named groups' name -> tag.
+    """
     tags, coords, _ = model.mesh.getNodes()
     points = coords.reshape(-1, 3)[:, :dim]
     index = np.empty(int(tags.max()) + 1 if tags.size else 0, dtype=np.int64)

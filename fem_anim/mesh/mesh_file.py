@@ -29,7 +29,11 @@ MARKER_KEYS = ("gmsh:physical", "medit:ref", "cell_markers", "CellEntityIds")
 
 def _fill_surface(points: np.ndarray, triangles: np.ndarray, element_size: float,
                   source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """Tetrahedralise the solid a closed surface bounds (checked first)."""
+    """Tetrahedralise the solid a closed surface bounds (checked first by :func:`check_surface`).
+
+    Raises:
+        MeshError: if the surface is not closed, manifold and connected, or gmsh fails.
+    """
     from fem_anim.meshes import build_volume_from_surface
 
     # merge repeated vertices (an STL has no others), keeping the first occurrences' order
@@ -59,6 +63,14 @@ def read_mesh_file(path: Path, dim: int, element_size: float
     a file of triangles only, such as an STL, OBJ or PLY surface, is
     taken as a closed surface and filled with tetrahedra of edge ``element_size``
     (:func:`check_surface`, :func:`fem_anim.meshes.build_volume_from_surface`).
+
+    Args:
+        path: The mesh file.
+        dim: 2 or 3, the scene's ``mesh.dim``.
+        element_size: Edge length of the tetrahedra filling a closed surface (m).
+
+    Returns:
+        ``(points (n, dim), cells (m, dim + 1), markers (m,), names)``.
 
     Raises:
         MeshError: naming the file, if it is missing, unreadable or has no usable cells.

@@ -48,10 +48,12 @@ class SimplexMesh:
 
     @property
     def dim(self) -> int:
+        """Topological (and geometric) dimension, 2 or 3."""
         return self.mesh.topology.dim
 
     @property
     def num_vertices_global(self) -> int:
+        """Number of geometry nodes over all ranks."""
         return self.mesh.geometry.index_map().size_global
 
 
@@ -81,12 +83,25 @@ def mesh_from_arrays(comm: MPI.Comm, points: np.ndarray, cells: np.ndarray,
                      one_body: bool = False) -> SimplexMesh:
     """Check and distribute a mesh given on rank 0 (collective).
 
-    With ``one_body`` the mesh must also be one connected piece without duplicate
-    vertices (:func:`fem_anim.mesh.connectivity.check_one_body`).
+    The check (:func:`fem_anim.mesh.checks.check_cells`) runs on rank 0 and its verdict is
+    broadcast, so a bad mesh raises the same :class:`MeshError` on all ranks.
 
-    Other ranks pass empty arrays of the right width. The check runs on rank 0 and its
-    verdict is broadcast, so a bad mesh raises the same :class:`MeshError` on all ranks.
-    ``marker_names`` (rank 0's is used) names the values of ``cell_markers``.
+    Args:
+        comm: The communicator the mesh is distributed over.
+        points: ``(n, d)`` vertex coordinates on rank 0; other ranks pass empty arrays of
+            the right width.
+        cells: ``(m, d + 1)`` vertex indices on rank 0 (empty elsewhere).
+        cell_markers: Region marker per cell on rank 0, or None for all 1.
+        source: What the mesh is, for error messages.
+        marker_names: Names of the marker values (rank 0's is used).
+        one_body: Also require one connected piece without duplicate vertices
+            (:func:`fem_anim.mesh.connectivity.check_one_body`).
+
+    Returns:
+        The distributed mesh, rank 0 keeping the input arrays.
+
+    Raises:
+        MeshError: on every rank, if the mesh fails a check.
     """
     error = None
     if comm.rank == 0:
