@@ -224,13 +224,13 @@ MUTATIONS: list[Mutation] = [
              (f"{IND}::test_reference_friction_gradient_by_finite_differences",),
              "reference f0 discontinuous at eps"),
     # -- extremes: expectations derived from the scene (issue 19 point 4) --------------------
-    Mutation("extremes-pin-sign", "fem_anim/bench/extremes.py",
+    Mutation("extremes-pin-sign", "fem_anim/bench/extreme_cases.py",
              "    return v * (t if until is None else min(t, until))",
              "    return -v * (t if until is None else min(t, until))",
              ("tests/test_extremes.py::test_expected_outcomes_follow_from_the_scene[2D]",),
              "pin displacement with the wrong sign: the press opens the gap it closes, so the "
              "crushed bar would be expected to finish"),
-    Mutation("extremes-stroke-compare", "fem_anim/bench/extremes.py",
+    Mutation("extremes-stroke-compare", "fem_anim/bench/extreme_cases.py",
              'g["first_closing"] >= case.keys["mesh"]["element_size"]',
              'g["first_closing"] <= case.keys["mesh"]["element_size"]',
              ("tests/test_extremes.py::test_expected_outcomes_follow_from_the_scene[2D]",),

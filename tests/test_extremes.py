@@ -1,7 +1,7 @@
 """Stability at the extremes (issue 6): expected against measured outcome, as a table.
 
 CI tier: the fast variants (2D, element size 0.1, a few steps) of every case of
-:func:`fem_anim.bench.extremes.cases` and the P1/P2 locking study; the full 3D grid is
+:func:`fem_anim.bench.extreme_cases.cases` and the P1/P2 locking study; the full 3D grid is
 ``-m slow``. The table of each tier is printed at the end of the module (pytest's
 terminal reporter) and is what ``fem-anim bench --extremes [--full]`` prints.
 """
@@ -11,9 +11,9 @@ import pytest
 import copy
 import re
 
-from fem_anim.bench.extremes import (FINISHES, cases, expected_outcome, format_table,
-                                     locking_rows, matches, pin_displacement, pinned_gaps,
-                                     run_case)
+from fem_anim.bench.extreme_cases import (FINISHES, cases, expected_outcome, matches,
+                                          pin_displacement, pinned_gaps)
+from fem_anim.bench.extremes import format_table, locking_rows, run_case
 
 FAST = cases(full=False)
 FULL = cases(full=True)

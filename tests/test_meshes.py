@@ -23,7 +23,9 @@ from mpi4py import MPI
 from fem_anim import meshes
 from fem_anim.cli import main
 from fem_anim.errors import MeshError, SceneError
-from fem_anim.mesh.build import build_mesh, cell_volumes, check_cells, check_surface, mesh_from_arrays
+from fem_anim.mesh.build import build_mesh
+from fem_anim.mesh.checks import cell_volumes, check_cells, check_surface
+from fem_anim.mesh.simplex import mesh_from_arrays
 from fem_anim.reference.box_mesh import box_mesh
 from fem_anim.scene.schema import MESH_SHAPES, SCHEMA, load_scene
 

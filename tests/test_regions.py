@@ -40,7 +40,7 @@ from test_reference_comparison import (
 
 from fem_anim import reference
 from fem_anim.errors import SceneError
-from fem_anim.mesh.build import mesh_from_arrays
+from fem_anim.mesh.simplex import mesh_from_arrays
 from fem_anim.problem.objective import EnergyProblem
 from fem_anim.simulation.loop import Simulation
 

@@ -210,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sizes", default=",".join(map(str, PEER_SIZES)))
     p.add_argument("--steps", type=int, default=10)
     p.add_argument("--set", dest="overrides", action="append", default=[])
-    p.add_argument("--out", default="demos/results")
+    p.add_argument("--out", default="demos/results/peers")
     try:
         args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
         try:

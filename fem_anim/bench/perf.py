@@ -70,7 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--direct-min-size", type=float, default=DIRECT_MIN_SIZE,
                    help="smallest element size for direct presets (their cost grows fastest)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
-    p.add_argument("--out", default="demos/results", help="output directory")
+    p.add_argument("--out", default="demos/results/perf", help="output directory")
     p.add_argument("--mpi", action="store_true", help="mpirun -n 2 on the largest mesh")
     p.add_argument("--repeats", type=int, default=3,
                    help="serial/mpirun pairs per preset in --mpi (the median is reported)")

@@ -2,7 +2,7 @@
 
     python -m fem_anim.bench.preview [--divisions NX,NY,NZ ...] [--steps N] [--out DIR]
 
-The beam of issue 18 and of pbatoolkit's examples: a box 1 x 0.2 x 0.2 m of NX x NY x NZ cubes
+The beam of pbatoolkit's examples: a box 1 x 0.2 x 0.2 m of NX x NY x NZ cubes
 cut into 6 tetrahedra each (``mesh.divisions``; 30 x 8 x 8 = 11 520 and 70 x 12 x 12 = 60 480
 tetrahedra by default), pinned at x = 0, hanging under gravity from rest, stable neo-Hookean
 (E = 1e5 Pa, nu = 0.3, 1000 kg/m^3), implicit Euler, dt = 1/60 s, 60 steps; the same mesh
@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sweeps", default=",".join(map(str, VBD_SWEEPS)))
     p.add_argument("--no-install", action="store_true",
                    help="do not install pbatoolkit if it is missing (compare fem_anim only)")
-    p.add_argument("--out", default="demos/results")
+    p.add_argument("--out", default="demos/results/preview")
     try:
         args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
         try:

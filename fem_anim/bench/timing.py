@@ -2,7 +2,8 @@
 
 A step's wall time is split into phases read from PETSc's event log (``PETSc.Log``):
 fem_anim's assembly callbacks (``FemAnimObjective``, ``FemAnimResidual``,
-``FemAnimJacobian``, ``FemAnimFilter``, ``FemAnimEnergies``: :data:`fem_anim.problem.objective.EVENTS`)
+``FemAnimJacobian``, ``FemAnimFilter``, ``FemAnimEnergies``:
+:data:`fem_anim.problem.objective.EVENTS`)
 and PETSc's ``PCSetUp`` (factorisation, or preconditioner set-up for Krylov presets; its
 symbolic part ``MatCholFctrSym``/``MatLUFactorSym`` reported on its own) and ``KSPSolve``
 (triangular solves, or Krylov iterations). The phases do not nest, and "other" is the step's

@@ -7,7 +7,8 @@ Every configuration of the swept knobs (:mod:`fem_anim.bench.sweep`) is built, r
 ``--repeats`` times and measured (:mod:`fem_anim.bench.measure`): wall time per
 simulated second (median of the repeats; mesh generation and form compilation reported
 separately), Newton and linear iterations, retries of the adaptive stepper, energy drift
-(:mod:`fem_anim.simulation.energy_report`), and the error against a fine reference run of the same scene:
+(:mod:`fem_anim.simulation.energy_report`), and the error against a fine reference run of the
+same scene:
 
     e_L2 = sqrt( sum_k sum_p |u(p, t_k) - u_ref(p, t_k)|^2 / sum_k sum_p |u_ref(p, t_k)|^2 )
 

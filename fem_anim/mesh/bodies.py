@@ -1,10 +1,10 @@
-"""Several bodies in one scene: one DOLFINx mesh that is their union (issue 16).
+"""Several bodies in one scene: one DOLFINx mesh that is their union.
 
 A scene's ``[[body]]`` tables each describe one body with the keys a one-body scene has
 at the top level (``mesh``, ``material``, ``initial``, ``[[body.pin]]``,
 ``[[body.region]]``) and where it stands: the body's mesh (made by the same builders,
-:mod:`fem_anim.mesh.build`) is rotated by ``rotation`` (degrees about x, then y, then z, i.e.
-x = R_z R_y R_x X + offset) and moved by ``offset`` (m). The bodies' meshes are
+:func:`fem_anim.mesh.build.mesh_arrays`) is rotated by ``rotation`` (degrees about x, then y,
+then z, i.e. x = R_z R_y R_x X + offset) and moved by ``offset`` (m). The bodies' meshes are
 concatenated (vertex numbers offset) into one mesh whose cell marker is the body number
 plus one, named by the body's name, so that
 
@@ -26,7 +26,8 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_anim.errors import MeshError, SceneError
-from fem_anim.mesh.build import SimplexMesh, build_mesh, mesh_arrays, mesh_from_arrays
+from fem_anim.mesh.build import build_mesh, mesh_arrays
+from fem_anim.mesh.simplex import SimplexMesh, mesh_from_arrays
 
 __all__ = ["body_regions", "body_pins", "build_scene_mesh", "rotation_matrix"]
 

@@ -29,7 +29,7 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 from fem_anim.errors import SceneError
-from fem_anim.mesh.build import SimplexMesh
+from fem_anim.mesh.simplex import SimplexMesh
 
 __all__ = ["MaterialMap", "MaterialSpec", "assign_materials", "local_cell_markers"]
 
