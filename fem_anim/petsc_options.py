@@ -1,4 +1,4 @@
-"""PETSc options: command-line splitting, initialisation and precedence (STYLE rules 5-6).
+"""PETSc options: command-line splitting, initialisation and precedence of option layers.
 
 Precedence, lowest to highest: library defaults < solver preset < scene
 ``[solver.petsc]`` < command line. The merged options are put into PETSc's
