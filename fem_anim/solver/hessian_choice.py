@@ -143,9 +143,10 @@ class HessianChoice(NewtonCGTrustRegion):
             self.leave_trust_region()
 
     def count_polish(self, steps: int) -> None:
-        """Count the round-off polish's full Newton steps (:meth:`~fem_anim.solver.minimiser.Minimiser.
-        _polish`, after :meth:`end_step`) under the Hessian the problem then assembles: exact,
-        or the filter in place (``project``, ``abs``; ``trust_region_filter``'s last choice).
+        """Count the round-off polish's full Newton steps
+        (:func:`fem_anim.solver.stopping.polish`, after :meth:`end_step`) under the Hessian the
+        problem then assembles: exact, or the filter in place (``project``, ``abs``;
+        ``trust_region_filter``'s last choice).
         """
         self.its[self.problem.hessian_filter or "exact"] += steps
 
