@@ -1,4 +1,4 @@
-"""PETSc options: command-line splitting, initialisation and precedence (STYLE rules 5-6).
+"""PETSc options: command-line splitting, initialisation and precedence of option layers.
 
 Precedence, lowest to highest: library defaults < solver preset < scene
 ``[solver.petsc]`` < command line. The merged options are put into PETSc's
@@ -98,7 +98,13 @@ def split_petsc_args(argv: list[str]) -> tuple[list[str], dict[str, str], list[s
 
 
 def init_petsc(global_args: list[str] | None = None) -> None:
-    """Initialise petsc4py with the global options, before dolfinx is imported."""
+    """Initialise petsc4py with the global options, before dolfinx is imported.
+
+    Does nothing if ``petsc4py.PETSc`` is already imported (PETSc is initialised once).
+
+    Args:
+        global_args: Global PETSc options as an argv list (``["-log_view"]``).
+    """
     import petsc4py
 
     if "petsc4py.PETSc" not in sys.modules:
@@ -109,6 +115,13 @@ def flatten_options(table: Mapping, parent: str = "") -> dict[str, str]:
     """Flatten a nested options table: ``{"ksp": {"type": "cg"}}`` -> ``{"ksp_type": "cg"}``.
 
     Booleans become PETSc's ``true``/``false``; ``true`` for a flag may also be written ``""``.
+
+    Args:
+        table: The scene's ``[solver.petsc]`` table, nested or flat.
+        parent: The name prefix of ``table``'s keys (for the recursion).
+
+    Returns:
+        Option name (without prefix) -> value as a string.
     """
     flat: dict[str, str] = {}
     for key, value in table.items():
@@ -123,7 +136,11 @@ def flatten_options(table: Mapping, parent: str = "") -> dict[str, str]:
 
 
 def merge_options(*layers: Mapping[str, str]) -> dict[str, str]:
-    """Merge option layers, later layers winning (defaults, preset, scene, command line)."""
+    """Merge option layers, later layers winning (defaults, preset, scene, command line).
+
+    Returns:
+        A new dictionary.
+    """
     merged: dict[str, str] = {}
     for layer in layers:
         merged.update(layer)
@@ -132,7 +149,12 @@ def merge_options(*layers: Mapping[str, str]) -> dict[str, str]:
 
 @contextlib.contextmanager
 def options_in_database(prefix: str, options: Mapping[str, str]) -> Iterator[None]:
-    """Put ``options`` under ``prefix`` in PETSc's database for the duration of the block."""
+    """Put ``options`` under ``prefix`` in PETSc's database for the duration of the block.
+
+    Args:
+        prefix: The solver's options prefix, ending in ``_``.
+        options: Option name (without prefix) -> value; removed again on leaving.
+    """
     from petsc4py import PETSc
 
     db = PETSc.Options()
@@ -219,6 +241,16 @@ def unused_options(prefix: str, names: Iterable[str]) -> list[str]:
     petsc4py has no binding of ``PetscOptionsUsed`` (the query behind ``-options_left``);
     it is called through ctypes on the global database. Call it while the options are in
     the database (:func:`options_in_database`).
+
+    Args:
+        prefix: The solver's options prefix.
+        names: Option names without prefix (those fem_anim reads itself are skipped).
+
+    Returns:
+        The names no PETSc object has read.
+
+    Raises:
+        OSError: if the PETSc library is not loaded or ``PetscOptionsUsed`` fails.
     """
     lib = _petsc_library()
     lib.PetscOptionsUsed.argtypes = [ctypes.c_void_p, ctypes.c_char_p,

@@ -21,7 +21,7 @@ from test_cli import read_stats
 from fem_anim.cli import main
 from fem_anim.errors import ConvergenceError
 from fem_anim.simulation.loop import AdaptiveStepper, Simulation
-from fem_anim.solver.minimiser import BUDGET_REASON, CONVERGED_REASONS
+from fem_anim.solver.stopping import BUDGET_REASON, CONVERGED_REASONS, accept_at_budget
 
 DT = 1.0 / 30.0
 #: The accepted x of a one-step budget against x_0 - alpha H^-1 r computed here: both are
@@ -196,6 +196,6 @@ def test_accept_keeps_only_an_iterate_that_lowered_g(tmp_path):
     x = sim.problem.x_work
     sim.problem.load_guess(sim.initial_state().u, x)
     g = sim.minimiser.objective(sim.minimiser.snes, x)
-    assert sim.minimiser._accept_at_budget(x, g + 1.0, 0.0, "step 1") == BUDGET_REASON
+    assert accept_at_budget(sim.minimiser, x, g + 1.0, 0.0, "step 1") == BUDGET_REASON
     with pytest.raises(ConvergenceError, match="did not improve on its initial guess"):
-        sim.minimiser._accept_at_budget(x, g - 1.0, 0.0, "step 1")
+        accept_at_budget(sim.minimiser, x, g - 1.0, 0.0, "step 1")

@@ -23,7 +23,7 @@ from fem_anim.errors import ConvergenceError
 from fem_anim.solver.hessian_choice import cg_probe
 from fem_anim.scene.schema import load_scene
 from fem_anim.simulation.loop import Simulation
-from fem_anim.solver.minimiser import HESSIAN_KINDS
+from fem_anim.solver.hessian_choice import HESSIAN_KINDS
 
 
 def _kinds(stats) -> dict:
@@ -65,9 +65,9 @@ def test_every_newton_iteration_is_counted_under_its_hessian(mode):
     for _ in range(14):
         state, stats = sim.step(state, scene["time"]["dt"])
         assert _kinds(stats) == {kind: stats.newton_its}, (state.step, stats.hessian_its)
-        taken = sim.minimiser.snes.getIterationNumber() + sim.minimiser._polish_its
+        taken = sim.minimiser.snes.getIterationNumber() + sim.minimiser.stop.polish_its
         assert stats.newton_its in (taken, taken + 1), state.step
-        polished += sim.minimiser._polish_its > 0
+        polished += sim.minimiser.stop.polish_its > 0
     assert polished >= 1, polished
 
 

@@ -20,7 +20,7 @@ from test_cli import read_stats
 from fem_anim.cli import main
 from fem_anim.solver.hessian_reuse import HessianReuse
 from fem_anim.simulation.loop import Simulation
-from fem_anim.solver.minimiser import CONVERGED_REASONS
+from fem_anim.solver.stopping import CONVERGED_REASONS
 
 STEPS = 3  # rest + Newton needs 51 iterations at step 4 (linear rate far from rest)
 #: Every option stops at snes_rtol 1e-8 (the default) of each step's first residual: the

@@ -320,7 +320,7 @@ def test_polish_meets_the_test_or_reports_it(tmp_path):
     """_polish: full Newton steps from near the solution meet a reachable test (reason 2/3),
     an unreachable one is reported as POLISH_FAILED_REASON, in stats and the energy report."""
     from fem_anim.simulation.energy_report import describe_energy, energy_report, initial_energies
-    from fem_anim.solver.minimiser import POLISH_FAILED_REASON
+    from fem_anim.solver.stopping import POLISH_FAILED_REASON, polish
 
     scene = write_scene(tmp_path, 3, "neohookean", integrator="implicit_euler", pinned=True)
     # an unreachable test: the line search stalls at the round-off floor of g, the polish
@@ -341,22 +341,22 @@ def test_polish_meets_the_test_or_reports_it(tmp_path):
     for bc in sim.problem.bcs:
         x.array[bc.dof_indices()[0]] = solution.array[bc.dof_indices()[0]]
     m.snes.setTolerances(rtol=1e-10, atol=0.0)
-    m._history = [(1.0, 0.0)]  # r0 = 1: the target is 1e-10
-    reason, norm = m._polish(x)
+    m.stop.history = [(1.0, 0.0)]  # r0 = 1: the target is 1e-10
+    reason, norm = polish(m, x)
     assert reason == 3 and norm <= 1e-10
     assert np.abs(x.array - solution.array).max() < 1e-9
     # ... and unreachable from there (max 5 full steps cannot reach 1e-30)
     m.snes.setTolerances(rtol=1e-30, atol=0.0)
-    reason, norm = m._polish(x)
+    reason, norm = polish(m, x)
     assert reason == POLISH_FAILED_REASON and norm > 1e-30
     # the decrement test: reachable (lambda^2/2 of the next direction <= 1e-20 J) or not
-    m.stopping = "decrement"
+    m.stop.stopping = "decrement"
     x.array[:] += 1e-6 * np.random.default_rng(14).uniform(-1, 1, x.array.size)
     for bc in sim.problem.bcs:
         x.array[bc.dof_indices()[0]] = solution.array[bc.dof_indices()[0]]
-    m.decrement_tol = 1e-20
-    reason, _ = m._polish(x)
-    assert reason == 5 and m._decrements[-1] <= 1e-20
-    m.decrement_tol = 0.0
-    reason, _ = m._polish(x)
+    m.stop.decrement_tol = 1e-20
+    reason, _ = polish(m, x)
+    assert reason == 5 and m.stop.decrements[-1] <= 1e-20
+    m.stop.decrement_tol = 0.0
+    reason, _ = polish(m, x)
     assert reason == POLISH_FAILED_REASON

@@ -1,25 +1,20 @@
 """Which Hessian each Newton iteration uses: ``solver.hessian`` (seed section 3.2.2, note 4).
 
 The remedies themselves (the shift's schedule, the per-point eigenvalue filters, the
-trust-region ratio) are in :mod:`fem_anim.solver.hessian_modification`; this module is the state a
-:class:`~fem_anim.solver.minimiser.Minimiser` keeps across the iterations of one step to apply them:
+trust-region ratio) are in :mod:`fem_anim.solver.hessian_modification`; :class:`HessianChoice`
+is the state a :class:`~fem_anim.solver.minimiser.Minimiser` keeps across the iterations of
+one step to apply them, as its SNES Jacobian callback (:meth:`HessianChoice.jacobian`):
 
 * ``exact``, ``project`` (clamp), ``abs``: the problem's Hessian as assembled (the filter,
   if any, is fixed for the run);
-* ``shift``: H + c I with c raised until the factorisation (or a CG probe) shows no
-  negative curvature, lowered after each success (:class:`~fem_anim.solver.hessian_modification.ShiftStrategy`);
+* ``shift``: H + c I with c raised until the factorisation (or a CG probe,
+  :func:`cg_probe`) shows no negative curvature, lowered after each success;
 * ``trust_region_filter``: clamp or abs per iteration from the ratio rho of the previous
   step's actual to predicted decrease under the unprojected model;
 * ``auto``: exact while the factorisation's inertia shows no negative pivot, else the
-  trust-region filter's choice; with CG (Krylov presets) the iteration is truncated Newton-CG
-  (Steihaug 1983; Nocedal & Wright, Algorithm 7.1): CG stopped by negative curvature
-  (``DIVERGED_INDEFINITE_MAT``) leaves its last iterate, a descent direction, and SNES takes
-  it (``SNESSetMaxLinearSolveFailures``); an ascent direction (negative curvature at CG's
-  first direction) is replaced by the abs-filtered Newton direction; once a step has shown CG
-  indefiniteness, the rest of the step is Newton-CG in a trust region (KSPSTCG, which follows
-  negative curvature to the region's boundary; the radius follows the exact model's ratio
-  rho), preconditioned by shifted incomplete Cholesky of A (positive definite); only when a
-  direction fails too (zero after a first negative curvature, or the line search fails) does
+  trust-region filter's choice. With CG (Krylov presets) the iteration is truncated
+  Newton-CG, in a trust region once the step meets indefiniteness
+  (:mod:`fem_anim.solver.trust_region`); only when a direction fails too does
   :meth:`HessianChoice.restart` continue the step filtered from its last iterate.
 
 Each step's iterations are counted per kind of Hessian (:data:`HESSIAN_KINDS`).
@@ -31,9 +26,9 @@ from collections import Counter
 
 from petsc4py import PETSc
 
-from fem_anim.solver import trust_region as ksp_trust_region
 from fem_anim.errors import ConvergenceError
-from fem_anim.solver.hessian_modification import ShiftStrategy, model_ratio, trust_radius, trust_region_choice
+from fem_anim.solver.hessian_modification import ShiftStrategy, model_ratio, trust_region_choice
+from fem_anim.solver.trust_region import NewtonCGTrustRegion
 
 __all__ = ["HessianChoice", "HESSIAN_KINDS", "FAILED_DIRECTION", "MAX_AUTO_RESTARTS",
            "cg_probe"]
@@ -42,9 +37,9 @@ __all__ = ["HessianChoice", "HESSIAN_KINDS", "FAILED_DIRECTION", "MAX_AUTO_RESTA
 #: exact, exact + c I with c > 0, elastic tangent clamped, elastic tangent abs-filtered.
 HESSIAN_KINDS = ("exact", "shift", "clamp", "abs")
 #: SNES reasons of a solve whose last iteration computed a direction and then dropped it: its
-#: linear solve failed (CG met negative curvature) or its line search did (no descent). PETSc
-#: does not count that iteration (:class:`~fem_anim.solver.minimiser.SolveStats` does); after either,
-#: ``hessian = "auto"`` continues the step with the filtered Hessian.
+#: linear solve failed (CG met negative curvature) or its line search did (no descent).
+#: PETSc does not count that iteration (:class:`~fem_anim.solver.solve_stats.SolveStats`
+#: does); after either, ``hessian = "auto"`` continues the step with the filtered Hessian.
 FAILED_DIRECTION = (PETSc.SNES.ConvergedReason.DIVERGED_LINEAR_SOLVE,
                     PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH)
 #: How often one step of ``auto`` may continue after such a failure.
@@ -69,7 +64,7 @@ def cg_probe(A: PETSc.Mat, pc_type: str = "jacobi", rtol: float = 1e-6,
     return reason
 
 
-class HessianChoice:
+class HessianChoice(NewtonCGTrustRegion):
     """The Hessian of each Newton iteration of one :class:`~fem_anim.solver.minimiser.Minimiser`.
 
     Args:
@@ -98,18 +93,7 @@ class HessianChoice:
         self.truncated = 0  # auto with CG: this step's solves stopped at negative curvature
         self._last_iterate = None
         self._inertia = True  # whether the factorisation reports its inertia (auto)
-        self._truncated = None  # auto: whether CG's truncated iterates are taken (first use)
-        self._indefinite_seen = False  # auto with CG: CG met indefiniteness in this step
-        self._pc_matrix = None  # auto with CG: the AIJ matrix CG is preconditioned by
-        self._abs_matrix = None  # ... the abs-filtered Hessian of descent_direction
-        self.aij_preconditioners = 0  # iterations preconditioned by it (the whole run)
-        self.descent_solves = 0  # ascent directions of CG replaced (the whole run)
-        self._extra_linear_its = 0  # CG iterations of those replacements, this SNES solve
-        self._radius = None  # auto with CG: the trust radius once the step met indefiniteness
-        self._in_region = False  # ... the KSP was switched to KSPSTCG by _trust_region
-        self._longest = 0.0  # ... the longest Newton direction of the step so far (its start)
-        self._step_taken = None  # (alpha, ||y||) of the step the last model ratio judged
-        self.trust_region_its = 0  # iterations solved by KSPSTCG in a trust region (the run)
+        self._start_trust_region()  # auto with CG (NewtonCGTrustRegion)
 
     def start_step(self) -> None:
         """Forget the previous step: counts, model, auto's state."""
@@ -139,8 +123,8 @@ class HessianChoice:
         :data:`MAX_AUTO_RESTARTS` times per step, the step goes on from its last iterate
         with the trust-region filter's Hessian.
         """
-        # a line search stalled on a truncated CG direction is that direction's fault
-        # (measured: step 55 of the 55k beam kept at ||r|| / ||r_0|| = 0.1 by the polish)
+        # a line search stalled on a truncated CG direction is that direction's fault, not
+        # the round-off floor's
         truncated = bool(self._truncated) and \
             self.snes.getKSP().getConvergedReason() < 0
         if self.mode != "auto" or reason not in FAILED_DIRECTION or (stalled and not truncated) \
@@ -159,9 +143,10 @@ class HessianChoice:
             self.leave_trust_region()
 
     def count_polish(self, steps: int) -> None:
-        """Count the round-off polish's full Newton steps (:meth:`~fem_anim.solver.minimiser.Minimiser.
-        _polish`, after :meth:`end_step`) under the Hessian the problem then assembles: exact,
-        or the filter in place (``project``, ``abs``; ``trust_region_filter``'s last choice).
+        """Count the round-off polish's full Newton steps
+        (:func:`fem_anim.solver.stopping.polish`, after :meth:`end_step`) under the Hessian the
+        problem then assembles: exact, or the filter in place (``project``, ``abs``;
+        ``trust_region_filter``'s last choice).
         """
         self.its[self.problem.hessian_filter or "exact"] += steps
 
@@ -222,7 +207,17 @@ class HessianChoice:
         Positive definiteness is read off the factorisation: the inertia of MUMPS's or
         PETSc's Cholesky (negative pivots), or a PETSc factorisation failure; for a
         Krylov preset CG is run on the shifted matrix and must not meet negative
-        curvature. c starts from the last successful shift, quartered (hessian.py).
+        curvature. c starts from the last successful shift, quartered
+        (:class:`~fem_anim.solver.hessian_modification.ShiftStrategy`).
+
+        Args:
+            snes: The minimiser's SNES.
+            x: The iterate.
+            A: The matrix assembled into (and shifted).
+            P: Its preconditioning matrix (the same).
+
+        Raises:
+            ConvergenceError: if the shift grows beyond 1e12 times the diagonal.
         """
         if self.mode in ("trust_region_filter", "auto"):
             self._filtered_jacobian(snes, x, A, P)
@@ -286,171 +281,6 @@ class HessianChoice:
                 self._trust_region(rho, A)
         self.its[how or "exact"] += 1
 
-    def _cg_saw_indefinite(self, snes) -> bool:
-        """Whether CG met an indefinite matrix or preconditioner earlier in this step."""
-        if snes.getIterationNumber() > 0 or self.restarts > 0:  # else: the last step's solve
-            R = PETSc.KSP.ConvergedReason
-            if snes.getKSP().getConvergedReason() in (R.DIVERGED_INDEFINITE_MAT,
-                                                      R.DIVERGED_INDEFINITE_PC):
-                self._indefinite_seen = True
-        return self._indefinite_seen
-
-    def _precondition(self, snes, x: PETSc.Vec, A: PETSc.Mat, how: str | None,
-                      seen: bool) -> None:
-        """``auto`` with CG: precondition by A itself or, once this step has shown CG an
-        indefinite matrix or preconditioner (``seen``) or A is filtered (``how``), by
-        incomplete Cholesky of an AIJ copy of A, which PETSc shifts to positive definite.
-
-        Newton-CG in a trust region (:meth:`_trust_region`) needs a symmetric positive
-        definite preconditioner (Nocedal & Wright, Algorithm 7.1; Steihaug 1983). PETSc's
-        ICC of a 3 x 3-block (BAIJ) matrix applies no shift: on an indefinite Hessian CG
-        stops after 2-3 iterations at ``DIVERGED_INDEFINITE_PC``, which is how a step first
-        shows its indefiniteness. ICC of AIJ storage applies the Manteuffel shift
-        (``POSITIVE_DEFINITE``, the default in PETSc 3.18 and 3.22): its factor L D L^T has
-        D > 0, so the preconditioner is positive definite whatever A is, and CG still runs
-        on the exact A. The copy (``MatConvert`` into a kept AIJ matrix) is made every
-        iteration: a current preconditioner. Measured on frames 46-60 of the undamped ~55k
-        beam (trust region on; one run each, load ~2): 6741 CG iterations and 24.0 s of
-        stepping, against 8315 and 29.5 s when the preconditioner was the abs-filtered
-        Hessian assembled once per step (an eigendecomposition per quadrature point, 0.43 s
-        a step on 55k points, and a factor that grows stale within the step) and 15556 and
-        33.6 s when that filtered Hessian was kept across steps.
-        """
-        J, current, (callback, args, kargs) = snes.getJacobian()
-        filtered = how is not None or seen
-        if filtered:
-            A.convert("aij", self._aij_matrix())
-            self.aij_preconditioners += 1
-        wanted = self._pc_matrix if filtered else A
-        if current.handle != wanted.handle:  # SNES passes (J, P) to the KSP after this call
-            snes.setJacobian(callback, J, wanted, *(args or ()), **(kargs or {}))
-
-    def _trust_region(self, rho: float | None, A: PETSc.Mat) -> None:
-        """``auto`` with CG, once the step has met an indefinite Hessian: Newton-CG in a trust
-        region (Steihaug 1983; Nocedal & Wright, Algorithms 4.1 and 7.2), by KSPSTCG.
-
-        Truncated CG stops *before* a direction of negative curvature and hands the line
-        search a Newton direction of the positive-curvature part: near a saddle of g such
-        directions overshoot (the ~55k beam's frame 46: 12 of its 33 iterations took the
-        backtracking's floor lambda = 0.1, 4 of them from CG's converged direction on an
-        indefinite Hessian). KSPSTCG follows negative curvature to the boundary of a trust
-        region ||d|| <= Delta (Euclidean in PETSc 3.18 and 3.22) and stops there when CG's
-        iterate leaves it, so the direction's length is the model's reach rather than the
-        Newton step's. Delta starts at the length of the step's longest Newton direction so
-        far (its first, from the initial guess: the scale of the step's motion; a step bound
-        or the line search cuts it at once; before any, :meth:`_jacobi_length`) and then follows
-        :func:`fem_anim.solver.hessian_modification.trust_radius` (rho of the exact model, whose curvature
-        y^T A y comes from KSPSTCG's model value: no assembly). The line search on g still
-        decides the step's length, and the stopping test is unchanged. The preconditioner
-        is positive definite, as KSPSTCG requires (:meth:`_precondition`).
-        """
-        ksp = self.snes.getKSP()
-        if self._radius is None:
-            self._radius = self._longest if self._longest > 0.0 else self._jacobi_length(A)
-        elif rho is not None and self._step_taken is not None:
-            self._radius = trust_radius(self._radius, rho, *self._step_taken)
-        self._step_taken = None
-        if not self._in_region:
-            ksp.setType("stcg")
-            self._in_region = True
-        ksp_trust_region.set_radius(ksp, self._radius)
-        self.trust_region_its += 1
-
-    def _jacobi_length(self, A: PETSc.Mat) -> float:
-        """||D^-1 r||, D = |diag A|: the length of the Jacobi step from the current iterate,
-        the first trust radius of a step that has no Newton direction yet (a restart before
-        any line search). Collective."""
-        d = A.getDiagonal()
-        d.abs()
-        step = self.problem_residual.duplicate()
-        step.pointwiseDivide(self.problem_residual, d)
-        length = step.norm()
-        d.destroy()
-        step.destroy()
-        return length
-
-    def _stcg_curvature(self, length: float, slope: float) -> float | None:
-        """y^T A y of the direction y (KSPSTCG's d, perhaps scaled since; ``length`` = ||y||,
-        ``slope`` = r . y) from the solve's model value m(d) = 1/2 d^T A d - r . d: no
-        assembly. None if the last solve was not KSPSTCG's in the trust region, failed, or
-        gave a zero direction."""
-        ksp = self.snes.getKSP()
-        if not self._in_region or ksp.getConvergedReason() < 0:
-            return None
-        norm_d = ksp_trust_region.direction_norm(ksp)
-        if not norm_d > 0.0:
-            return None
-        t = length / norm_d  # y = t d (a step bound may have scaled it)
-        return 2.0 * t * t * (ksp_trust_region.model_value(ksp) + slope / t)
-
-    def leave_trust_region(self) -> None:
-        """Plain CG again (the step ended, or a full Newton step is wanted), if
-        :meth:`_trust_region` made it KSPSTCG (a KSPSTCG of the user's options stays)."""
-        if self._in_region:
-            self.snes.getKSP().setType("cg")
-            self._in_region = False
-
-    def _aij_matrix(self) -> PETSc.Mat:
-        """The AIJ preconditioning matrix (made at its first use), the target of
-        ``MatConvert``: assembling into it is not safe (on several ranks the converted
-        matrix keeps only the nonzeros it was converted from: a form's new nonzero is an
-        error, measured on the 55k beam on 2 ranks)."""
-        if self._pc_matrix is None:
-            self._pc_matrix = self.problem.create_matrix("aij")
-        return self._pc_matrix
-
-    def _assemble_abs(self, snes, x: PETSc.Vec) -> PETSc.Mat:
-        """The abs-filtered Hessian at x, assembled into a matrix of its own."""
-        if self._abs_matrix is None:
-            self._abs_matrix = self.problem.create_matrix("aij")
-        self.problem.set_hessian_filter("abs")
-        self.problem.jacobian(snes, x, self._abs_matrix, self._abs_matrix)
-        self.problem.set_hessian_filter(None)
-        return self._abs_matrix
-
-    def descent_direction(self, x: PETSc.Vec, y: PETSc.Vec, r: PETSc.Vec) -> bool:
-        """``auto`` with CG: replace an ascent direction y of a failed CG solve by the
-        abs-filtered Newton direction (solves M + w K_|.| y = r); whether y was replaced.
-
-        PETSc's KSPCG (3.18 to 3.22) declares ``DIVERGED_INDEFINITE_MAT`` on a *change of
-        sign* of p^T A p between two directions: when the first direction already has
-        negative curvature it steps along it with a negative length and stops one
-        direction later, so its iterate is an ascent direction (r . y < 0: the line search
-        then fails down to lambda = 1e-12; seen on the crushed stable neo-Hookean cube,
-        where auto with ``cg-icc`` stopped at step 3). The filtered system is positive
-        definite, so its solution is a descent direction. Called before the line search
-        (:meth:`fem_anim.solver.minimiser.Minimiser._precheck`); the iteration counts as ``abs``.
-        """
-        ksp = self.snes.getKSP()
-        if not self._truncated or ksp.getConvergedReason() >= 0 or r.dot(y) > 0.0:
-            return False
-        M = self._assemble_abs(self.snes, x)
-        self._indefinite_seen = True
-        ksp.setOperators(M, M)  # SNES sets its own again next
-        y.zeroEntries()
-        ksp.solve(r, y)
-        self._extra_linear_its += ksp.getIterationNumber()
-        self.descent_solves += 1
-        self.its["exact"] -= 1
-        self.its["abs"] += 1
-        return True
-
-    def _truncate_cg(self) -> None:
-        """``auto`` with CG: Newton takes CG's iterate when CG meets negative curvature.
-
-        PETSc's KSPCG (3.18 and 3.22) stops at p^T H p <= 0 before updating x, so x holds the
-        last iterate x_j = sum_i a_i p_i of conjugate directions with positive curvature,
-        started from 0: r^T x_j < 0, a descent direction for g (Nocedal & Wright, Theorem
-        7.2 with a symmetric positive definite preconditioner). SNES counts such a solve
-        as a failure and stops at ``snes_max_linear_solve_fail`` of them (default 1):
-        raising the limit makes it take the iterate; the line search on g and the stopping
-        test of every accepted step are unchanged. A zero iterate (negative curvature at
-        CG's first direction) fails the line search and :meth:`restart` takes over.
-        """
-        self._truncated = self.snes.getKSP().getType() == "cg"
-        if self._truncated:
-            self.snes.setMaxLinearSolveFailures(1 << 30)
-
     def enable_inertia(self, A: PETSc.Mat) -> None:
         """Ask MUMPS's Cholesky for the inertia of its factors (``auto``).
 
@@ -509,9 +339,8 @@ class HessianChoice:
         return cg_probe(A) != PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
 
     def destroy(self) -> None:
-        for matrix in (self._pc_matrix, self._abs_matrix):
-            if matrix is not None:
-                matrix.destroy()
+        """Free the matrices and vectors kept across steps."""
+        self._destroy_trust_region()
         if self._last_iterate is not None:
             self._last_iterate.destroy()
         self.drop_model()

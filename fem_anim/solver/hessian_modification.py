@@ -66,9 +66,9 @@ RHO_TOLERANCE = 0.01
 def _blas_thread_setter():
     """OpenBLAS's ``openblas_set_num_threads`` / ``get`` as loaded by numpy (None if absent).
 
-    numpy's batched ``eigh`` calls LAPACK once per small matrix; a threaded OpenBLAS wakes
-    its threads for each call: measured 0.07 s for 400 9 x 9 matrices with 2 threads on an
-    idle machine (0.6 s at load 8) against 0.0023 s with one.
+    numpy's batched ``eigh`` calls LAPACK once per small matrix, and a threaded OpenBLAS
+    wakes its threads for each call, which costs far more than the call itself: the filters
+    run it on one thread (:func:`_eigh_single_threaded`).
     """
     import ctypes
 
@@ -165,7 +165,8 @@ def abs_psd(tangent: np.ndarray) -> np.ndarray:
     return filter_tangent(tangent, "abs")
 
 
-#: Filter name -> the per-point map (:class:`fem_anim.problem.quadrature.QuadratureData` calls it).
+#: Filter name -> the per-point map
+#: (:class:`fem_anim.problem.quadrature.QuadratureData` calls it).
 FILTERS = {"clamp": project_psd, "abs": abs_psd}
 
 

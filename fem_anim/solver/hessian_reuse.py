@@ -1,4 +1,4 @@
-"""How often Newton's Hessian is rebuilt: ``solver.hessian_update`` (issue 18, point 2).
+"""How often Newton's Hessian is rebuilt: ``solver.hessian_update`` (seed eq. 10).
 
 Each Newton iteration solves H d = r (seed eq. 10). Any symmetric positive definite H
 gives a descent direction of the step objective g (r . d = r^T H^-1 r > 0), so the line

@@ -1,0 +1,314 @@
+"""When a step's Newton iteration stops, and what it reports (seed section 3.2, definition 4).
+
+``solver.stopping`` picks the test of :class:`StoppingTest`, which SNES calls once per
+iteration (``SNESSetConvergenceTest``):
+
+* ``"norm"``: PETSc's residual-norm tests ||r|| <= ``snes_atol`` or
+  ||r|| <= ``snes_rtol`` r0 (r0 the norm at the initial guess);
+* ``"decrement"``: the Newton decrement lambda^2/2 = r^T H^-1 r / 2 <= ``decrement_tol``
+  (seed definition 4; affine invariant, in the units of g), read from the Newton direction
+  before its line search.
+
+Either test also stops at the *round-off floor*: an iteration that neither halves ||r||
+nor changes g by more than its floating-point resolution (:func:`resolution`) has nothing
+left to gain and stops with :data:`ROUNDOFF_REASON`, as does a line search that fails
+because the predicted decrease is below that resolution (:func:`at_objective_roundoff`).
+:func:`finish_at_roundoff` then takes full Newton steps judged by the residual alone
+(:func:`polish`) and reports whether the test was met. ``solver.max_iterations`` with
+``on_budget = "accept"`` keeps an iterate that lowered g at the budget
+(:func:`accept_at_budget`, :data:`BUDGET_REASON`).
+
+A saddle point (``element.formulation = "mixed"``) has no g to judge by: the round-off test
+becomes ||r|| no longer halving below :data:`SADDLE_FLOOR` r0, and its decrement is NaN.
+
+The functions taking ``m`` act on a :class:`fem_anim.solver.minimiser.Minimiser`: its
+``snes``, ``problem``, residual vector ``b``, ``objective``, ``newton_step``, ``hessian``,
+``budget`` and ``stop`` (its :class:`StoppingTest`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from petsc4py import PETSc
+
+from fem_anim.errors import ConvergenceError
+from fem_anim.solver.step_bounds import step_limit
+
+__all__ = ["BUDGET_REASON", "CONVERGED_REASONS", "DECREMENT_REASON", "POLISH_FAILED_REASON",
+           "ROUNDOFF_REASON", "ROUNDOFF_ULPS", "SADDLE_FLOOR", "StoppingTest",
+           "accept_at_budget", "at_objective_roundoff", "finish_at_roundoff", "polish",
+           "reason_name", "resolution"]
+
+#: Reason the convergence test gives when Newton stopped at the round-off floor of the
+#: objective: PETSc's CONVERGED_SNORM_RELATIVE, which PETSc itself never reports here
+#: (``snes_stol`` is 0). :func:`finish_at_roundoff` then decides the reason reported.
+ROUNDOFF_REASON = 4
+#: The resolution of g, in units in the last place of max |g| (:func:`resolution`).
+ROUNDOFF_ULPS = 4096.0
+#: Reason recorded when the Newton-decrement test stopped the iteration: PETSc's
+#: CONVERGED_ITS ("converged by a user test"; a plain iteration cap is DIVERGED_MAX_IT).
+DECREMENT_REASON = 5
+#: A saddle point's Newton is at its round-off floor when an iteration no longer halves
+#: ||r|| although ||r|| is already this far below its first value.
+SADDLE_FLOOR = 1e-6
+#: Reason recorded when Newton stopped at the round-off floor and the polish's full Newton
+#: steps did not reach the requested test either (no PETSc reason is 6): the step is kept,
+#: as converged as double precision allows, but it is *not* converged to the test.
+POLISH_FAILED_REASON = 6
+#: Reason recorded when ``solver.on_budget = "accept"`` kept the iterate reached after
+#: ``solver.max_iterations`` Newton iterations because it decreased the step objective
+#: (no PETSc reason is 7): accepted, *not* converged to the test.
+BUDGET_REASON = 7
+#: Reasons of a step that met its stopping test.
+CONVERGED_REASONS = (2, 3, DECREMENT_REASON)
+
+
+def resolution(*values: float) -> float:
+    """The smallest change of the objective distinguishable from round-off near ``values``:
+    :data:`ROUNDOFF_ULPS` x machine epsilon x max |value|."""
+    return ROUNDOFF_ULPS * np.finfo(float).eps * max(abs(v) for v in values)
+
+
+def reason_name(enum, value: int) -> str:
+    """``"NAME (value)"`` of a PETSc reason enumeration's member, or the bare value."""
+    for name in dir(enum):
+        if not name.startswith("_") and getattr(enum, name) == value:
+            return f"{name} ({value})"
+    return str(value)
+
+
+class StoppingTest:
+    """The convergence test of one minimiser, with the step's residual and decrement history.
+
+    Args:
+        stopping: ``solver.stopping``: ``"norm"`` or ``"decrement"``.
+        decrement_tol: ``solver.decrement_tol`` (J), for ``"decrement"``.
+        saddle: Whether the problem is a saddle point (no objective to judge by).
+
+    Attributes:
+        history: ``(||r||, g)`` at each iteration of the step (``history[0][0]`` is r0; an
+            ``auto`` or Hessian-reuse restart continues it).
+        decrements: lambda^2/2 of each Newton direction of the step.
+        restarting: Set by the minimiser before an SNES solve that continues the step.
+        polish_its: Full Newton steps of the last polish.
+        polish_assemblies: ... of those, the ones that assembled a Hessian.
+    """
+
+    def __init__(self, stopping: str = "norm", decrement_tol: float = 0.0,
+                 saddle: bool = False):
+        self.stopping = stopping
+        self.decrement_tol = decrement_tol
+        self.saddle = saddle
+        self.history: list[tuple[float, float]] = []
+        self.decrements: list[float] = []
+        self.restarting = False
+        self.polish_its = 0
+        self.polish_assemblies = 0
+
+    def start(self) -> None:
+        """A new step: no decrements, no polish, not restarting."""
+        self.decrements = []
+        self.polish_its = self.polish_assemblies = 0
+        self.restarting = False
+
+    @property
+    def initial_norm(self) -> float:
+        """r0 of the step (NaN before its first test)."""
+        return self.history[0][0] if self.history else float("nan")
+
+    @property
+    def last_decrement(self) -> float:
+        """lambda^2/2 of the step's last Newton direction (NaN without one)."""
+        return self.decrements[-1] if self.decrements else float("nan")
+
+    def target(self, snes: PETSc.SNES) -> float:
+        """The residual norm the norm test asks for: max(snes_atol, snes_rtol r0)."""
+        rtol, atol, _, _ = snes.getTolerances()
+        return max(atol, rtol * self.history[0][0]) if self.history else atol
+
+    def test(self, it: int, fnorm: float, g: float,
+             tolerances: tuple[float, float, float, int]) -> int:
+        """The SNES reason after iteration ``it``: the chosen test, or the round-off floor.
+
+        Args:
+            it: The iteration number (0: the initial guess).
+            fnorm: ||r|| at the iterate.
+            g: The objective there (NaN for a saddle point).
+            tolerances: ``snes.getTolerances()``: (rtol, atol, stol, max_it).
+
+        Returns:
+            A ``PETSc.SNES.ConvergedReason``, :data:`DECREMENT_REASON` or
+            :data:`ROUNDOFF_REASON` (0, ITERATING, to go on).
+        """
+        rtol, atol, _, max_it = tolerances
+        if it == 0 and not self.restarting:
+            self.history = []  # an auto restart keeps the step's first norm (snes_rtol)
+        if it == 0 and self.restarting:
+            self.restarting = False
+            self.history.append((fnorm, g))
+            return PETSc.SNES.ConvergedReason.ITERATING
+        self.history.append((fnorm, g))
+        R = PETSc.SNES.ConvergedReason
+        if not np.isfinite(fnorm):
+            return R.DIVERGED_FNORM_NAN
+        if self.stopping == "decrement":
+            # lambda^2/2 of the previous Newton direction (the step from it is taken)
+            if it > 0 and self.decrements and self.decrements[-1] <= self.decrement_tol:
+                return DECREMENT_REASON
+        elif fnorm <= atol:
+            return R.CONVERGED_FNORM_ABS
+        elif fnorm <= rtol * self.history[0][0]:
+            return R.CONVERGED_FNORM_RELATIVE
+        if it > 0 and not self.saddle:
+            f_prev, g_prev = self.history[-2]
+            if fnorm > 0.5 * f_prev and abs(g_prev - g) <= resolution(g, g_prev):
+                return ROUNDOFF_REASON
+        elif it > 0:  # a saddle point: judged by ||r|| alone (no g to see round-off in)
+            f_prev = self.history[-2][0]
+            if fnorm > 0.5 * f_prev and fnorm <= SADDLE_FLOOR * self.history[0][0]:
+                return ROUNDOFF_REASON
+        if it >= max_it:
+            return R.DIVERGED_MAX_IT
+        return R.ITERATING
+
+
+def at_objective_roundoff(m, x: PETSc.Vec, g0: float) -> bool:
+    """Whether Newton cannot decrease g any further in floating point.
+
+    The predicted decrease of a Newton step is lambda^2/2 = r^T H^-1 r / 2 (seed
+    definition 4). When it is below :func:`resolution` of max(|g(x)|, |g(x_0)|) the
+    backtracking line search must fail, and x is as converged as double precision allows.
+    Uses the factorisation of the last Jacobian.
+
+    Args:
+        m: The minimiser.
+        x: The iterate where the line search failed.
+        g0: g at the step's initial guess.
+    """
+    g = m.objective(m.snes, x)
+    m.hessian.leave_trust_region()  # the full Newton step's decrement
+    r, step = m.b.duplicate(), m.b.duplicate()
+    m.problem.residual(m.snes, x, r)
+    decrement = m.newton_step(x, r, step, assemble_hessian=False)
+    r.destroy()
+    step.destroy()
+    return decrement <= resolution(g, g0)
+
+
+def polish(m, x: PETSc.Vec, max_steps: int = 5, assemble: bool = True) -> tuple[int, float]:
+    """Full Newton steps judged by the residual, where g can no longer judge them.
+
+    Below the objective's round-off the line search cannot tell a good step from a bad one,
+    but the residual still can: take full steps (x updated in place) while each at least
+    halves ||r|| and keeps clear of contact (:func:`fem_anim.solver.step_bounds.step_limit`),
+    then apply the chosen test (norms: ``snes_atol``, ``snes_rtol``; or the decrement of
+    the next Newton direction). The steps are counted in ``m.stop.polish_its`` (and
+    ``polish_assemblies``).
+
+    Args:
+        m: The minimiser.
+        x: The iterate, overwritten with the last accepted full step.
+        max_steps: At most this many full steps.
+        assemble: False solves with the kept Hessian and its factorisation instead
+            (``hessian_update = "rest"``, whose constant factorisation would otherwise be
+            lost).
+
+    Returns:
+        The SNES reason to report (CONVERGED_FNORM_ABS / _RELATIVE, :data:`DECREMENT_REASON`,
+        or :data:`POLISH_FAILED_REASON` if the test is still not met: x is kept, as
+        converged as double precision allows) and the final residual norm.
+    """
+    stop = m.stop
+    _, atol, _, _ = m.snes.getTolerances()
+    target = stop.target(m.snes)
+    R = PETSc.SNES.ConvergedReason
+    stop.polish_its = stop.polish_assemblies = 0
+    r, step, trial, r_trial = (m.b.duplicate() for _ in range(4))
+    try:
+        m.problem.residual(m.snes, x, r)
+        norm = r.norm()
+        for _ in range(max_steps):
+            if norm <= target and stop.stopping == "norm":
+                break
+            decrement = m.newton_step(x, r, step, assemble_hessian=assemble)
+            stop.polish_its += 1
+            stop.polish_assemblies += assemble
+            stop.decrements.append(np.nan if stop.saddle else decrement)
+            if stop.stopping == "decrement" and decrement <= stop.decrement_tol:
+                return DECREMENT_REASON, norm
+            if step_limit(m.problem, x, step) < 1.0:
+                break  # a full step must keep clear of obstacles and other surfaces
+            x.copy(trial)
+            trial.axpy(-1.0, step)
+            m.problem.residual(m.snes, trial, r_trial)
+            trial_norm = r_trial.norm()
+            if not trial_norm <= 0.5 * norm:
+                break
+            trial.copy(x)
+            r_trial.copy(r)
+            norm = trial_norm
+        m.problem.set_state(x)
+        if norm <= target and stop.stopping == "norm":
+            return (R.CONVERGED_FNORM_ABS if norm <= atol else R.CONVERGED_FNORM_RELATIVE,
+                    norm)
+        return POLISH_FAILED_REASON, norm
+    finally:
+        for v in (r, step, trial, r_trial):
+            v.destroy()
+
+
+def finish_at_roundoff(m, x: PETSc.Vec, steps: int) -> tuple[int, float]:
+    """The polish of a step stopped at the round-off floor: its reason and residual norm.
+
+    With ``hessian_update = "rest"`` the kept factorisation is tried first, then, if the
+    test is still not met, the exact Hessian for the steps left. ``m.stop.polish_its``
+    counts all the full steps taken.
+
+    Args:
+        m: The minimiser.
+        x: The iterate, overwritten as by :func:`polish`.
+        steps: At most this many full Newton steps in all.
+    """
+    stop = m.stop
+    if m.reuse.mode == "rest":  # first with the kept factorisation
+        reason, norm = polish(m, x, max_steps=steps, assemble=False)
+        kept_its = stop.polish_its
+        if reason == POLISH_FAILED_REASON and steps - kept_its > 0:
+            reason, norm = polish(m, x, max_steps=steps - kept_its)  # exact
+            stop.polish_its += kept_its
+        return reason, norm
+    return polish(m, x, max_steps=steps)
+
+
+def accept_at_budget(m, x: PETSc.Vec, g0: float, norm: float, what: str) -> int:
+    """``on_budget = "accept"``: keep x, the iterate after the budget, if it improved.
+
+    A minimisation keeps x when g(x) < g(x_0) (the initial guess), a saddle point when
+    ||r(x)|| < ||r(x_0)||.
+
+    Args:
+        m: The minimiser.
+        x: The iterate after ``solver.max_iterations`` Newton iterations.
+        g0: g at the initial guess.
+        norm: ||r(x)||.
+        what: The step's name, for the error.
+
+    Returns:
+        :data:`BUDGET_REASON`.
+
+    Raises:
+        ConvergenceError: if it did not improve (the step fails as without a budget).
+    """
+    if m.stop.saddle:
+        r0 = m.stop.history[0][0] if m.stop.history else np.inf
+        better, shown = norm < r0, f"residual norm {norm:.6e}, initially {r0:.6e}"
+    else:
+        g = m.objective(m.snes, x)
+        better, shown = g < g0, f"g = {g:.10e}, at the initial guess {g0:.10e}"
+    if not better:
+        raise ConvergenceError(
+            f"{what}: after its budget of {m.budget} Newton iterations "
+            f"(solver.max_iterations) the step did not improve on its initial guess "
+            f"({shown}), so it cannot be accepted")
+    m.problem.set_state(x)
+    return BUDGET_REASON
