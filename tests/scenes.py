@@ -23,7 +23,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from fem_anim.scene.schema import Scene, load_scene
+from fem_anim.scene import Scene, load_scene
 
 __all__ = ["DENSITY", "DIVISIONS", "LENGTHS", "POISSON_RATIO", "YOUNGS_MODULUS", "bar", "beam",
            "make_scene", "merge", "scene_toml", "to_toml", "toml_list", "wall_pin"]
