@@ -48,7 +48,7 @@ import numpy as np
 
 from fem_anim.errors import ConvergenceError, FemAnimError, SceneError
 from fem_anim.mesh.build import cell_volumes
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene.loading import load_scene
 
 __all__ = ["Case", "Outcome", "cases", "run_case", "locking_rows", "mixed_locking_rows",
            "format_table", "main", "scene_text", "OUTCOMES", "COMPLETED", "ENERGY_GROWTH_BOUND",

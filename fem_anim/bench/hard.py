@@ -155,7 +155,7 @@ def hard_scenes(reduced: bool = False) -> list[HardScene]:
 
 
 def _scene(hard: HardScene, mode: str):
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene.loading import load_scene
     from fem_anim.bench.extremes import _load
 
     sets = [f'solver.hessian="{mode}"', f"time.steps={hard.steps}", "output.render=false"]

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from fem_anim.errors import SceneError
 from fem_anim.solver.presets import preset_options
-from fem_anim.scene.schema import Scene, load_scene, parse_override
+from fem_anim.scene.loading import Scene, load_scene, parse_override
 from fem_anim.bench.pareto import short
 
 __all__ = ["Configuration", "Study", "parse_sweep", "split_values", "expand_study"]
