@@ -1,18 +1,21 @@
 """What fem_anim prints on the terminal besides results: the one-line error, a quiet JIT.
 
-Used by the command line (:mod:`fem_anim.cli`) and by the benches (:mod:`fem_anim.bench`),
-which both sit above this module (STYLE rule 15).
+Used by the command line (:mod:`fem_anim.cli`), the benches (:mod:`fem_anim.bench`) and the
+Python API (:mod:`fem_anim.runs`), which all sit above this module.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
+from collections.abc import Iterator
+from pathlib import Path
 
 from fem_anim.errors import FemAnimError
 
-__all__ = ["OneLineParser", "print_error", "quiet_jit_logging"]
+__all__ = ["OneLineParser", "print_error", "quiet_jit_logging", "quiet_jit"]
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -46,3 +49,45 @@ def quiet_jit_logging() -> None:
     """
     for handler in logging.getLogger().handlers:
         handler.setLevel(logging.WARNING)
+
+
+class _BuildLogFilter(logging.Filter):
+    """Drops the build log of setuptools' distutils (the FFCx JIT's C compiler calls):
+    records below WARNING logged from a ``distutils`` module."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        parts = Path(record.pathname).parts
+        return record.levelno >= logging.WARNING or not (
+            "distutils" in parts or "_distutils" in parts)
+
+
+_FILTER = _BuildLogFilter()
+_depth = 0
+
+
+@contextlib.contextmanager
+def quiet_jit() -> Iterator[None]:
+    """Keep the FFCx JIT's build log (``INFO:root:running build_ext``, the compiler
+    command lines) off the terminal while the block runs; for library use.
+
+    FFCx configures the root logger at import (``logging.basicConfig()``) and each compile
+    runs setuptools' distutils, which logs every command at INFO on the root logger.
+    Inside the block a filter on the root logger drops those records, and only those;
+    the root logger's level is restored at the end. A program whose root logger was at
+    INFO or below when the block began asked for such lines and sees them.
+    """
+    global _depth
+    root = logging.getLogger()
+    level = root.level
+    asked = level != logging.NOTSET and level <= logging.INFO
+    if not asked:
+        root.addFilter(_FILTER)
+    _depth += 1
+    try:
+        yield
+    finally:
+        _depth -= 1
+        if not asked:
+            root.setLevel(level)
+            if _depth == 0:
+                root.removeFilter(_FILTER)
