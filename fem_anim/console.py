@@ -53,16 +53,17 @@ def quiet_jit_logging() -> None:
 
 class _BuildLogFilter(logging.Filter):
     """Drops the build log of setuptools' distutils (the FFCx JIT's C compiler calls):
-    records below WARNING logged from a ``distutils`` module."""
+    records below WARNING logged by a ``distutils`` module or to a ``distutils`` logger."""
 
     def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            return True
         parts = Path(record.pathname).parts
-        return record.levelno >= logging.WARNING or not (
-            "distutils" in parts or "_distutils" in parts)
+        return not ("distutils" in parts or "_distutils" in parts
+                    or record.name.split(".")[0] == "distutils")
 
 
 _FILTER = _BuildLogFilter()
-_depth = 0
 
 
 @contextlib.contextmanager
@@ -71,23 +72,21 @@ def quiet_jit() -> Iterator[None]:
     command lines) off the terminal while the block runs; for library use.
 
     FFCx configures the root logger at import (``logging.basicConfig()``) and each compile
-    runs setuptools' distutils, which logs every command at INFO on the root logger.
-    Inside the block a filter on the root logger drops those records, and only those;
-    the root logger's level is restored at the end. A program whose root logger was at
-    INFO or below when the block began asked for such lines and sees them.
+    runs setuptools' distutils, which logs every command at INFO. Inside the block a filter
+    on the root logger and its handlers drops those records, and only those; the root
+    logger's level is restored at the end. A program whose root logger was at INFO or below
+    when the block began asked for such lines and sees them.
     """
-    global _depth
     root = logging.getLogger()
     level = root.level
     asked = level != logging.NOTSET and level <= logging.INFO
-    if not asked:
-        root.addFilter(_FILTER)
-    _depth += 1
+    added = [] if asked else [t for t in (root, *root.handlers) if _FILTER not in t.filters]
+    for target in added:  # an enclosing block's filters stay until that block ends
+        target.addFilter(_FILTER)
     try:
         yield
     finally:
-        _depth -= 1
         if not asked:
             root.setLevel(level)
-            if _depth == 0:
-                root.removeFilter(_FILTER)
+        for target in added:
+            target.removeFilter(_FILTER)

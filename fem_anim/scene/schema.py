@@ -32,14 +32,15 @@ MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohooke
 FORMULATIONS = ("displacement", "mixed")
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
-#: ``solver.hessian_update``: how often Newton's Hessian is rebuilt (fem_anim/solver/hessian_reuse.py).
+#: ``solver.hessian_update``: how often Newton's Hessian is rebuilt
+#: (:mod:`fem_anim.solver.hessian_reuse`).
 HESSIAN_UPDATES = ("every_iteration", "every_step", "lagged", "rest")
 NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
 OBSTACLE_TYPES = ("plane", "sphere")
 #: What ``render.color_by`` may name: vertex |displacement|, the cells' mean psi, or one
 #: colour per body (the mesh's connected parts: the ``[[body]]`` tables in order).
 COLOR_FIELDS = ("displacement", "energy_density", "body")
-#: Named camera views (``auto``: ``side`` in 3D, ``xy`` in 2D; see fem_anim/render/process.py).
+#: Named camera views (``auto``: ``side`` in 3D, ``xy`` in 2D; :mod:`fem_anim.render.frames`).
 VIEWS = ("auto", "side", "iso", "xy", "xz", "yz")
 #: What ``render.outputs`` may list: PNG frames, an animated GIF, an MP4 video.
 RENDER_OUTPUTS = ("frames", "gif", "mp4")

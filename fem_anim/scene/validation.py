@@ -1,4 +1,4 @@
-"""Checking a parsed scene against the key schema, at the boundary (STYLE rule 8).
+"""Checking a parsed scene against the key schema, once, at the boundary.
 
 :func:`validate_scene` takes the tables of a scene (parsed TOML, overrides applied, the
 solver mode filled in) and returns them complete: unknown tables and keys, wrong types,
