@@ -114,7 +114,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "mass": Key(str, "consistent", choices=("consistent", "lumped"),
                     doc="mass matrix: consistent, or lumped row sums (P1 only)"),
         "mooney_ratio": Key(NUM, 0.3, c.in_closed(0, 1, "must be in [0, 1]"),
-                            doc="mooney_rivlin: the share of the shear modulus in the I2 term"),
+                            doc="mooney_rivlin: the Mooney ratio r, the share of the shear "
+                            "modulus in the I2 term (c01 = r mu / 2)"),
     },
     "time": {
         "integrator": Key(str, "newmark", choices=INTEGRATORS, doc="time integrator"),
@@ -215,10 +216,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "method": Key(str, "newton", choices=NONLINEAR_METHODS, doc="the minimiser"),
         "stopping": Key(str, "norm", choices=("norm", "decrement"),
                         doc="residual-norm tests, or the Newton decrement"),
-        "decrement_tol": Key(NUM, 1e-14, c.positive, unit="J",
-                             doc="stopping = \"decrement\": lambda^2/2 at most this"),
+        "decrement_tol": Key(NUM, 1e-14, c.positive,
+                             doc="stopping = \"decrement\": lambda^2/2 at most this, in the "
+                             "units of the step objective g"),
         "hessian": Key(str, "exact", choices=HESSIAN_MODES,
-                       doc="Newton's Hessian, or a filtered one (mode fills \"auto\")"),
+                       doc="Newton's Hessian, or a filtered one (when not given, solver.mode "
+                       "fills \"auto\" where it applies)"),
         "forcing": Key(str, "tight", choices=("tight", "adaptive"),
                        doc="Krylov tolerance per Newton iteration: fixed, or Eisenstat-Walker"),
         "inversion_filter": Key(bool, None, doc="halve Newton steps that invert an element "
