@@ -32,7 +32,7 @@ from fem_anim.forms.kinematics import deformation_gradient
 from mpi4py import MPI
 
 from fem_anim import compat
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"

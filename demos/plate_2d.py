@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"

@@ -35,7 +35,7 @@ from mpi4py import MPI
 from scipy.optimize import brentq
 
 from fem_anim.reference import deformation_gradient
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"

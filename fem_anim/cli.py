@@ -90,7 +90,7 @@ def _output_directory(args, scene) -> str:
 def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     from mpi4py import MPI
 
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene.loading import load_scene
 
     if args.solver is not None and not args.solver.strip():
         raise FemAnimError("--solver needs a preset name (see `fem-anim solvers`), got ''")
@@ -147,7 +147,7 @@ def _render(args) -> int:
     from fem_anim.render.animation import check_run_directory
     from fem_anim.render.process import render_run
     from fem_anim.output.rundir import check_not_in_use
-    from fem_anim.scene.schema import validate_render
+    from fem_anim.scene.loading import validate_render
 
     outdir = Path(args.outdir)
     check_run_directory(outdir)

@@ -1,18 +1,21 @@
 """What fem_anim prints on the terminal besides results: the one-line error, a quiet JIT.
 
-Used by the command line (:mod:`fem_anim.cli`) and by the benches (:mod:`fem_anim.bench`),
-which both sit above this module (STYLE rule 15).
+Used by the command line (:mod:`fem_anim.cli`), the benches (:mod:`fem_anim.bench`) and the
+Python API (:mod:`fem_anim.runs`), which all sit above this module.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
+from collections.abc import Iterator
+from pathlib import Path
 
 from fem_anim.errors import FemAnimError
 
-__all__ = ["OneLineParser", "print_error", "quiet_jit_logging"]
+__all__ = ["OneLineParser", "print_error", "quiet_jit_logging", "quiet_jit"]
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -46,3 +49,44 @@ def quiet_jit_logging() -> None:
     """
     for handler in logging.getLogger().handlers:
         handler.setLevel(logging.WARNING)
+
+
+class _BuildLogFilter(logging.Filter):
+    """Drops the build log of setuptools' distutils (the FFCx JIT's C compiler calls):
+    records below WARNING logged by a ``distutils`` module or to a ``distutils`` logger."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            return True
+        parts = Path(record.pathname).parts
+        return not ("distutils" in parts or "_distutils" in parts
+                    or record.name.split(".")[0] == "distutils")
+
+
+_FILTER = _BuildLogFilter()
+
+
+@contextlib.contextmanager
+def quiet_jit() -> Iterator[None]:
+    """Keep the FFCx JIT's build log (``INFO:root:running build_ext``, the compiler
+    command lines) off the terminal while the block runs; for library use.
+
+    FFCx configures the root logger at import (``logging.basicConfig()``) and each compile
+    runs setuptools' distutils, which logs every command at INFO. Inside the block a filter
+    on the root logger and its handlers drops those records, and only those; the root
+    logger's level is restored at the end. A program whose root logger was at INFO or below
+    when the block began asked for such lines and sees them.
+    """
+    root = logging.getLogger()
+    level = root.level
+    asked = level != logging.NOTSET and level <= logging.INFO
+    added = [] if asked else [t for t in (root, *root.handlers) if _FILTER not in t.filters]
+    for target in added:  # an enclosing block's filters stay until that block ends
+        target.addFilter(_FILTER)
+    try:
+        yield
+    finally:
+        if not asked:
+            root.setLevel(level)
+        for target in added:
+            target.removeFilter(_FILTER)

@@ -20,7 +20,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import AdaptiveStepper, Simulation
 
 #: (label, solver keys); the first is the reference.

@@ -313,7 +313,7 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_safety.py::"
               "test_an_interruption_between_ffcx_lock_and_compile_leaves_no_lock",),
              "a signal's Interrupted between FFCx's lock and its try leaves the lock"),
-    Mutation("damping-beta-ignored", "fem_anim/scene/schema.py",
+    Mutation("damping-beta-ignored", "fem_anim/scene/loading.py",
              'and (damping["alpha"] > 0 or damping["beta"] > 0)', 'and damping["alpha"] > 0',
              ("tests/test_cli.py::test_default_scene_outputs",),
              "stiffness-proportional damping alone builds no term (the default scene undamped)"),

@@ -4,7 +4,7 @@ The tests need many small variations of a few bodies. Instead of a TOML template
 module, a scene is a dictionary (top-level keys, ``{section: {key: value}}`` tables and
 ``{array: [{key: value}, ...]}`` arrays of tables, exactly the layout of a scene file),
 built from a base (:func:`beam`, :func:`bar`) with :func:`merge`, and written and validated
-by :func:`make_scene` through :func:`fem_anim.scene.schema.load_scene` like any scene file.
+by :func:`make_scene` through :func:`fem_anim.scene.loading.load_scene` like any scene file.
 A key whose value is ``None`` is left out (the scene default applies).
 
 The bases:
@@ -23,7 +23,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from fem_anim.scene.schema import Scene, load_scene
+from fem_anim.scene import Scene, load_scene
 
 __all__ = ["DENSITY", "DIVISIONS", "LENGTHS", "POISSON_RATIO", "YOUNGS_MODULUS", "bar", "beam",
            "make_scene", "merge", "scene_toml", "to_toml", "toml_list", "wall_pin"]

@@ -32,14 +32,13 @@ from test_cli import BAD_INPUT
 
 from fem_anim.cli import main
 from fem_anim.errors import SceneError
+from fem_anim.scene import Scene, load_scene
 from fem_anim.scene.schema import (
     INTEGRATORS,
     MATERIAL_MODELS,
     MESH_SHAPES,
     NONLINEAR_METHODS,
     SCHEMA,
-    Scene,
-    load_scene,
 )
 
 PREFIX = "fem-anim: error: "

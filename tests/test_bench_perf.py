@@ -17,7 +17,7 @@ from fem_anim.bench import perf
 from fem_anim.bench.timing import growth_exponent
 from fem_anim.bench.worker import PHASE_COLUMNS, measure
 from fem_anim.errors import FemAnimError
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 
 TINY = ["mesh.element_size=0.1", "output.render=false"]
 

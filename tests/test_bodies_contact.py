@@ -22,7 +22,7 @@ from petsc4py import PETSc
 from fem_anim import compat
 from fem_anim.cli import main
 from fem_anim.contact.intersection import crossed_frames
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 #: Two soft cubes of different materials thrown at each other, the right one turned 10 deg.

@@ -18,7 +18,7 @@ import pytest
 from conftest import ROOT, assert_rows_meet_the_test, clean_environment, fem_anim_command
 
 from fem_anim.cli import main
-from fem_anim.scene.schema import default_scene_text, load_scene
+from fem_anim.scene import default_scene_text, load_scene
 
 
 def read_stats(path: Path) -> list[dict[str, float]]:

@@ -30,7 +30,7 @@ from petsc4py import PETSc
 
 from fem_anim import compat
 from fem_anim.problem.objective import compile_forms
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 PIN_VELOCITY = np.array([0.0, 0.3, 0.1])  # m/s

@@ -36,7 +36,7 @@ from test_reference_comparison import Comparison
 
 from fem_anim import compat, reference
 from fem_anim.contact.obstacles import KEEP_FRACTION
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: reference dof map")

@@ -16,7 +16,7 @@ from mpi4py import MPI
 
 from fem_anim.errors import SceneError
 from fem_anim.forms.damping import dissipation_potential
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 

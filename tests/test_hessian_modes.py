@@ -21,7 +21,7 @@ from test_solver_menu import run_steps, squash
 from fem_anim import compat
 from fem_anim.errors import ConvergenceError
 from fem_anim.solver.hessian_choice import cg_probe
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 from fem_anim.solver.hessian_choice import HESSIAN_KINDS
 

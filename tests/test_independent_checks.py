@@ -39,7 +39,7 @@ from test_contact import GAP, near_contact_positions, reference_scene
 from test_reference_comparison import Comparison, beam_mesh, reference_order, write_scene
 
 from fem_anim import compat, reference
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: reference dof map")

@@ -31,7 +31,7 @@ from petsc4py import PETSc
 
 from fem_anim import compat
 from fem_anim.errors import SceneError
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 COMM = MPI.COMM_WORLD

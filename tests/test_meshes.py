@@ -27,7 +27,8 @@ from fem_anim.mesh.build import build_mesh
 from fem_anim.mesh.checks import cell_volumes, check_cells, check_surface
 from fem_anim.mesh.simplex import mesh_from_arrays
 from fem_anim.reference.box_mesh import box_mesh
-from fem_anim.scene.schema import MESH_SHAPES, SCHEMA, load_scene
+from fem_anim.scene import load_scene
+from fem_anim.scene.schema import MESH_SHAPES, SCHEMA
 
 DATA = ROOT / "meshes" / "data"
 sys.path.insert(0, str(DATA))

@@ -268,7 +268,7 @@ def test_the_default_scene_mixed_names_its_damping():
     """The default scene's Rayleigh damping (beta K_0 needs lambda, infinite at nu = 0.5) is
     refused with the way out; with beta = 0 the same scene loads."""
     from fem_anim.errors import SceneError
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene import load_scene
 
     mixed = ["element.degree=2", 'element.formulation="mixed"']
     with pytest.raises(SceneError, match=r"set damping.alpha = damping.beta = 0"):

@@ -37,7 +37,8 @@ from fem_anim.solver.presets import (
     parallel_options,
     preset_options,
 )
-from fem_anim.scene.schema import SCHEMA, default_scene_text, load_scene
+from fem_anim.scene import default_scene_text, load_scene
+from fem_anim.scene.schema import SCHEMA
 from fem_anim.simulation.loop import solver_options
 
 SMALL = ["--set", "mesh.element_size=0.1", "--set", "time.steps=2",

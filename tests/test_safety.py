@@ -417,7 +417,7 @@ def test_edited_checkpoint_is_refused_and_nothing_committed(interrupted, tmp_pat
 def test_checkpoint_altered_byte_by_byte(interrupted, capsys):
     """Every altered byte (a spread of positions): refused, or read exactly as written."""
     from fem_anim.simulation.checkpoint import load_checkpoint
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene import load_scene
     from fem_anim.simulation.loop import Simulation
 
     out, original = interrupted
@@ -493,7 +493,7 @@ def test_body_at_rest_gets_no_relative_figure(tmp_path):
 
 def test_newmark_is_never_told_to_use_newmark():
     from fem_anim.simulation.energy_report import describe_energy
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene import load_scene
 
     report = {"drift": -0.2, "max_excursion": 0.2, "exchanged_energy": 1.0,
               "conservative": True, "damped": True, "gained": False, "flagged": True,

@@ -15,7 +15,7 @@ import pytest
 from mpi4py import MPI
 
 from fem_anim.errors import ConvergenceError
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 
 SQUASH = """

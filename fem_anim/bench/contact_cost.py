@@ -51,7 +51,7 @@ def _measure(h: float, steps: int, out: Path) -> None:
     """Run the bench in this process (every rank); rank 0 writes the results."""
     from mpi4py import MPI
 
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene.loading import load_scene
     from fem_anim.simulation.loop import Simulation
 
     comm = MPI.COMM_WORLD

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.scene.schema import load_scene
+from fem_anim.scene.loading import load_scene
 
 __all__ = ["Case", "cases", "beam_scene", "scene_text", "load_case_scene", "OUTCOMES",
            "COMPLETED", "ENERGY_GROWTH_BOUND", "FINISHES", "sag_bound", "expected_outcome",
@@ -305,7 +305,7 @@ def load_case_scene(data: dict, overrides: list[str] = ()):
     """Validate a scene dictionary exactly as a file, with ``--set KEY=VALUE`` overrides.
 
     The dictionary is written as TOML (:func:`scene_text`) to a temporary file and loaded
-    by :func:`fem_anim.scene.schema.load_scene` (each rank reads its own copy).
+    by :func:`fem_anim.scene.loading.load_scene` (each rank reads its own copy).
 
     Returns:
         The validated scene.

@@ -155,8 +155,8 @@ def hard_scenes(reduced: bool = False) -> list[HardScene]:
 
 
 def _scene(hard: HardScene, mode: str):
-    from fem_anim.scene.schema import load_scene
     from fem_anim.bench.extreme_cases import load_case_scene
+    from fem_anim.scene.loading import load_scene
 
     sets = [f'solver.hessian="{mode}"', f"time.steps={hard.steps}", "output.render=false"]
     if hard.data is None:

@@ -56,7 +56,7 @@ def options_table(scene_path, overrides, out: Path, log=print, h: float = 0.025,
     """Run every case in this process; the markdown section (also ``out/options.md``)."""
     from mpi4py import MPI
 
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene.loading import load_scene
     from fem_anim.bench.report import md_table
     from fem_anim.bench.worker import measure
 

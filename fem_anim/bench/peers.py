@@ -131,7 +131,7 @@ def compare(scene_path, overrides, h: float, steps: int, python: Path | None, lo
     from mpi4py import MPI
 
     from fem_anim.mesh.build import build_mesh
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene.loading import load_scene
 
     settings = [*overrides, *SCENE_SETTINGS, f"mesh.element_size={h}", f"time.steps={steps}"]
     scene = load_scene(scene_path, settings)

@@ -214,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(app_args)
         _validate(args)
         if args.worker:
-            from fem_anim.scene.schema import load_scene
+            from fem_anim.scene.loading import load_scene
             from fem_anim.bench.worker import run_worker
 
             scene = load_scene(args.scene, args.overrides)

@@ -84,7 +84,7 @@ def compare(divisions, steps: int, python: Path | None, log=print, configs=CONFI
     from mpi4py import MPI
 
     from fem_anim.mesh.build import build_mesh
-    from fem_anim.scene.schema import load_scene
+    from fem_anim.scene.loading import load_scene
     from fem_anim.bench.peers import _fem_anim, _pbat
 
     keys = [*BEAM, f"mesh.divisions={list(divisions)}", f"time.steps={steps}"]

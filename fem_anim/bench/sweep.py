@@ -3,8 +3,8 @@
 Every sweep key is a dotted scene key (``time.dt``, ``mesh.element_size``,
 ``element.degree``, ``element.quadrature_degree``, ``time.integrator``, ``solver.preset``,
 ``material.mass``, ``solver.stopping``, ``solver.petsc.snes_rtol``, ...), each value is
-parsed and validated exactly like ``--set`` (:func:`fem_anim.scene.schema.parse_override`,
-:func:`fem_anim.scene.schema.load_scene`): a bad key or value is a :class:`SceneError` naming
+parsed and validated exactly like ``--set`` (:func:`fem_anim.scene.loading.parse_override`,
+:func:`fem_anim.scene.loading.load_scene`): a bad key or value is a :class:`SceneError` naming
 it. The configurations are the Cartesian product of the sweeps; a combination that the
 scene's cross-key rules forbid (lumped mass with P2) is kept as *skipped* with the
 reason, not an error.
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from fem_anim.errors import SceneError
 from fem_anim.solver.presets import preset_options
-from fem_anim.scene.schema import Scene, load_scene, parse_override
+from fem_anim.scene.loading import Scene, load_scene, parse_override
 from fem_anim.bench.pareto import short
 
 __all__ = ["Configuration", "Study", "parse_sweep", "split_values", "expand_study"]

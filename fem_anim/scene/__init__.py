@@ -1,6 +1,12 @@
-"""Scenes: the TOML schema with its defaults, loading and ``--set`` overrides, the cross-key
-consistency rules, and ``solver.mode``'s named sets of solver keys. A scene is validated once,
-here, at the boundary; everything downstream reads a checked :class:`Scene`.
+"""Scenes: what a scene file may hold, how it is read and checked.
+
+:mod:`~fem_anim.scene.schema` lists every key with its type, default, unit and meaning
+(:func:`scene_keys`); :mod:`~fem_anim.scene.constraints` says what one key's value may be;
+:mod:`~fem_anim.scene.loading` makes a :class:`Scene` from a file, a TOML string or a dict,
+with ``--set`` overrides; :mod:`~fem_anim.scene.validation` checks it key by key and
+:mod:`~fem_anim.scene.consistency` the keys against each other; :mod:`~fem_anim.scene.modes`
+holds ``solver.mode``'s named sets of solver keys. A scene is validated once, here, at the
+boundary; everything downstream reads a checked :class:`Scene`.
 """
 
 from fem_anim.lazy_exports import lazy_exports
@@ -17,10 +23,14 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "SOLVER_MODES": "modes",
     "apply_solver_mode": "modes",
     "DEFAULTS": "schema",
+    "KeyInfo": "schema",
     "SCHEMA": "schema",
-    "Scene": "schema",
-    "default_scene_text": "schema",
-    "load_scene": "schema",
-    "parse_override": "schema",
-    "validate_render": "schema",
+    "SECTIONS": "schema",
+    "scene_keys": "schema",
+    "Scene": "loading",
+    "default_scene_text": "loading",
+    "load_scene": "loading",
+    "parse_override": "loading",
+    "validate_render": "loading",
+    "validate_scene": "validation",
 })

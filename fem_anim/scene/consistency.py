@@ -1,8 +1,8 @@
-"""Cross-key rules of a scene: what no single key's type or range can say (STYLE rule 8).
+"""Cross-key rules of a scene: what no single key's type or range can say.
 
-:mod:`fem_anim.scene.schema` checks each key on its own (type, length, range) against its
-``SCHEMA``; :func:`check_consistency` then checks the keys against each other on the
-validated data, before anything is built: list lengths match ``mesh.dim``, the mesh is
+:mod:`fem_anim.scene.validation` checks each key on its own (type, length, range) against
+:data:`~fem_anim.scene.schema.SCHEMA`; :func:`check_consistency` then checks the keys
+against each other on the validated data, before anything is built: list lengths match ``mesh.dim``, the mesh is
 not absurdly fine (:data:`MAX_CELLS`), pin and region boxes are not empty, each
 ``[[obstacle]]`` has the keys of its type, ``[initial]`` and ``[render]`` settings fit
 together, and solver settings are compatible with the element and material choices.
@@ -35,7 +35,8 @@ MIXED_PRESETS = ("ldlt", "lu", "schur")
 
 
 def _check_formulation(data: dict[str, Any]) -> None:
-    """element.formulation against the material, mass, degree and solver (fem_anim.problem.mixed_space)."""
+    """element.formulation against the material, mass, degree and solver (the mixed
+    Taylor-Hood space of :mod:`fem_anim.problem.mixed_space`)."""
     mat, element, solver = data["material"], data["element"], data["solver"]
     mixed = element["formulation"] == "mixed"
     if not mixed:
@@ -161,7 +162,14 @@ def _check_pins(pins: list[dict[str, Any]], d: int, prefix: str = "") -> None:
 
 
 def check_consistency(data: dict[str, Any]) -> None:
-    """Cross-key rules: dimensions agree, files exist, settings are compatible."""
+    """Cross-key rules: dimensions agree, boxes are not empty, settings are compatible.
+
+    Args:
+        data: A scene whose keys each passed their own check (every key present).
+
+    Raises:
+        SceneError: for the first rule broken, naming the keys and their values.
+    """
     d = data["mesh"]["dim"]
     if data["body"]:
         _check_bodies(data)
@@ -336,7 +344,11 @@ def _check_obstacle(i: int, obstacle: dict[str, Any], d: int) -> None:
 
 
 def check_render(render: dict[str, Any]) -> None:
-    """A camera given by position: the focal point and up vector need it, and differ from it."""
+    """A camera given by position: the focal point and up vector need it, and differ from it.
+
+    Raises:
+        SceneError: naming the ``render`` keys.
+    """
     position = render["camera_position"]
     for key in ("focal_point", "view_up"):
         if render[key] is not None and position is None:

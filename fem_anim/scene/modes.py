@@ -1,30 +1,26 @@
 """``solver.mode``: named sets of solver keys, the trade of accuracy for speed in one word.
 
 A mode fills the ``[solver]`` keys a scene (or ``--set``) did not give; every key given
-explicitly still wins, as does ``--solver`` on the command line. ``"exact"`` (the default)
-fills ``hessian = "auto"`` (Newton's exact Hessian until it is indefinite: README "Hessian
-modes on hard steps"): Newton to the residual test of the preset (seed section 3.2, eq. 10).
+explicitly still wins, as does ``--solver`` on the command line.
 
-``"preview"`` is one Newton step per time step, accepted unconverged when it decreased the
-step objective (``max_iterations = 1``, ``on_budget = "accept"``: the linearly implicit step
-of Baraff and Witkin, seed eq. 10 taken once from the predictor), solved by conjugate
-gradients with incomplete Cholesky (``cg-icc``) to a relative residual of 1e-4 (``[solver.petsc]
-ksp_rtol``), with ``hessian = "auto"``. One Newton step is ~1e-3 from the converged step, so
-solving its linear system to the preset's 1e-10 buys nothing: on the 11 520-tetrahedron beam
-1e-4 takes 25 CG iterations per step instead of 58 for the same tip (1e-3: 18, with a tip 13 %
-further off). ``auto`` keeps the exact Hessian and filters it only where CG meets negative
-curvature: a bent 60k-tetrahedron beam's Hessian is indefinite from t ~ 0.5 s, where CG on the
-exact Hessian alone fails and the step with it.
+* ``"exact"`` (the default) fills ``hessian = "auto"`` (Newton's exact Hessian until it is
+  indefinite, then a filtered one: :mod:`fem_anim.solver.hessian_modification`): Newton to
+  the residual test of the preset (seed section 3.2, eq. 10).
+* ``"preview"`` is one Newton step per time step, accepted unconverged when it decreased the
+  step objective (``max_iterations = 1``, ``on_budget = "accept"``: the linearly implicit
+  step of Baraff and Witkin, seed eq. 10 taken once from the predictor), solved by
+  conjugate gradients with incomplete Cholesky (``cg-icc``) to a relative residual of 1e-4
+  (``[solver.petsc] ksp_rtol``), with ``hessian = "auto"``: one Newton step is far from the
+  converged step already, so solving its linear system to the preset's 1e-10 buys nothing,
+  and ``auto`` lets CG survive the negative curvature of a strongly bent body. Every step it
+  accepts without meeting the residual test is marked in ``stats.csv`` (reason 7,
+  ``residual_ratio``), so the inexactness is visible.
 
-It was chosen from the speed/accuracy front of the trade study (README "A preview faster and
-better than VBD"; ``python -m fem_anim.bench.preview``): on the peers' beam of 11 520
-tetrahedra it runs about 2.5x faster than the fastest exact configuration, with the tip within
-~1e-3 of the exact trajectory, where pbatoolkit's VBD at 20 sweeps is both slower and tens of
-percent off. Every step it accepts without meeting the residual test is marked in stats.csv
-(reason 7, ``residual_ratio``), so the inexactness is visible. A mixed (u, p) scene keeps its
-saddle-point preset and exact Hessian; a scene whose regions use several material models, or
-that names another ``method`` or a ``hessian_update``, keeps the exact Hessian in either mode
-(``auto`` filters one model's tangent, and a kept Hessian is never filtered).
+A mixed (u, p) scene keeps its saddle-point preset and exact Hessian; a scene whose regions
+use several material models, or that names another ``method`` or a ``hessian_update``,
+keeps the exact Hessian in either mode (``auto`` filters one model's tangent, and a kept
+Hessian is never filtered). The measurements behind the preview's settings are in the
+documentation's notes (``python -m fem_anim.bench.preview`` regenerates them).
 """
 
 from __future__ import annotations
@@ -44,9 +40,13 @@ SOLVER_MODES: dict[str, dict[str, Any]] = {
 
 
 def apply_solver_mode(raw: dict[str, Any]) -> None:
-    """Fill ``raw["solver"]`` (a parsed, not yet validated scene) from its ``mode``.
+    """Fill ``raw["solver"]`` (a parsed, not yet validated scene) from its ``mode``, in place.
 
-    Leaves anything malformed to the validator (an unknown mode, a non-table).
+    Args:
+        raw: The scene's tables as parsed, overrides applied.
+
+    Leaves anything malformed to the validator (an unknown mode, a non-table): it raises
+    nothing.
     """
     solver = raw.setdefault("solver", {})
     mode = solver.get("mode", "exact") if isinstance(solver, dict) else None  # schema default

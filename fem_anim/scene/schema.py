@@ -1,370 +1,292 @@
-"""Scene files: schema, defaults, validation and ``--set`` overrides (STYLE rule 8).
+"""The scene keys: every table and key a scene file may hold, with its type, default, unit,
+one-line meaning and constraint.
 
-A scene is TOML data, never code. :func:`load_scene` parses it, applies
-``--set KEY=VALUE`` overrides and validates everything before anything is built:
-unknown keys, wrong types and nonphysical values raise :class:`SceneError` with the
-dotted key path, the constraint and the value.
-
-Sections describing the body and the run (``mesh``, ``element``, ``material``,
-``time``, ``solver``, ``output``) fall back key by key to :data:`DEFAULTS`; physical
-terms (``gravity``, ``pin``, ``obstacle``) exist only when the scene declares them.
-``[[region]]`` entries override the body's ``[material]`` on parts of the mesh
-(:mod:`fem_anim.mesh.regions`); ``[initial]`` gives the body a rigid initial velocity
-(:mod:`fem_anim.simulation.initial_state`). ``[[body]]`` tables describe several bodies, each with its
-own ``mesh``, ``material``, ``initial``, ``[[body.pin]]`` and ``[[body.region]]``
-(:mod:`fem_anim.mesh.bodies`); ``[contact]`` makes surfaces repel each other
-(:mod:`fem_anim.contact.ipc`). Rules between keys (lengths match ``mesh.dim``, boxes are not
-empty, settings are compatible) are checked after each key's own, in
-:mod:`fem_anim.scene.consistency`.
+A scene is TOML data, never code. Tables that describe the body and the run (``mesh``,
+``element``, ``material``, ``time``, ``solver``, ``output``, ``render``) fall back key by
+key to their defaults (:data:`DEFAULTS`); physical terms (``[gravity]``, ``[damping]``,
+``[initial]``, ``[contact]``, ``[[pin]]``, ``[[region]]``, ``[[obstacle]]``) exist only
+when a scene declares them. ``[[body]]`` tables describe several bodies, each with its own
+``mesh``, ``material``, ``initial``, ``[[body.pin]]`` and ``[[body.region]]``, whose keys are
+those of the top-level tables. :func:`scene_keys` lists every key as a :class:`KeyInfo`;
+:mod:`fem_anim.scene.validation` checks a scene against :data:`SCHEMA`.
 """
 
 from __future__ import annotations
 
-import errno
-import math
-import os
-import re
-import stat
-import tomllib
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
-from importlib import resources
-from pathlib import Path
+from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import Any
 
-from fem_anim.errors import SceneError
-from fem_anim.errors import show_value as _show
+from fem_anim.scene import constraints as c
+from fem_anim.scene.modes import SOLVER_MODES
 from fem_anim.solver.hessian_modification import MODES as HESSIAN_MODES
-from fem_anim.scene.consistency import check_consistency, check_render
-from fem_anim.scene.modes import SOLVER_MODES, apply_solver_mode
 
-__all__ = ["Scene", "load_scene", "parse_override", "validate_render", "DEFAULTS", "SCHEMA",
-           "default_scene_text"]
+__all__ = ["Key", "KeyInfo", "SCHEMA", "DEFAULTS", "SECTIONS", "OPTIONAL_SECTIONS",
+           "ARRAY_SECTIONS", "BODY_TABLES", "BODY_ARRAYS", "REQUIRED", "NUM", "scene_keys",
+           "type_text", "MATERIAL_MODELS", "FORMULATIONS", "INTEGRATORS", "MESH_SHAPES",
+           "HESSIAN_UPDATES", "NONLINEAR_METHODS", "OBSTACLE_TYPES", "COLOR_FIELDS", "VIEWS",
+           "RENDER_OUTPUTS"]
 
 MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
                    "corotated_lagged", "mooney_rivlin")
 FORMULATIONS = ("displacement", "mixed")
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
 MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
-#: ``solver.hessian_update``: how often Newton's Hessian is rebuilt (fem_anim/solver/hessian_reuse.py).
+#: ``solver.hessian_update``: how often Newton's Hessian is rebuilt
+#: (:mod:`fem_anim.solver.hessian_reuse`).
 HESSIAN_UPDATES = ("every_iteration", "every_step", "lagged", "rest")
 NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
 OBSTACLE_TYPES = ("plane", "sphere")
-MAX_MAGNITUDE = 1.0e150  # larger values are taken as a typo or an attack, not physics
-MAX_STEPS = 10**9  # frames; more is a typo (at 60 frames/s, 190 days of animation)
-MAX_FILE_BYTES = 1 << 20  # a scene is a page of TOML; refuse to slurp anything bigger
-MAX_STRING = 1024  # characters in any string value (paths included)
-#: ``name`` becomes the directory ``out/<name>``: one file-name-safe token, no separators.
-NAME_PATTERN = re.compile(r"\w[\w.-]{0,99}")
-#: PETSc option names (the parts joined by ``_`` when ``[solver.petsc]`` is flattened).
-PETSC_KEY = re.compile(r"[A-Za-z0-9_]+")
-#: PETSc viewers that write files or open connections: a scene may not name them
-#: (``ksp_view_mat = "binary:/elsewhere"``); the command line may.
-PETSC_WRITING_VIEWERS = ("binary", "hdf5", "vtk", "vtu", "matlab", "socket", "saws", "adios",
-                         "exodusii", "glvis", "mathematica", "pythonviewer")
-
-
-@dataclass(frozen=True)
-class Key:
-    """One scene key: its type, default (``None``: required or derived) and constraint."""
-
-    kind: type | tuple[type, ...]
-    default: Any = None
-    check: Callable[[Any], str | None] | None = None
-    length: tuple[int, ...] | None = None  # allowed list lengths
-
-
-def _positive(v) -> str | None:
-    return None if v > 0 else "must be > 0"
-
-
-def _non_negative(v) -> str | None:
-    return None if v >= 0 else "must be >= 0"
-
-
-def _one_of(options) -> Callable[[Any], str | None]:
-    return lambda v: None if v in options else f"must be one of {', '.join(map(str, options))}"
-
-
-def _in_open(lo, hi) -> Callable[[Any], str | None]:
-    return lambda v: None if lo < v < hi else f"must be in ({lo}, {hi})"
-
-
-def _all_positive(v) -> str | None:
-    return None if all(c > 0 for c in v) else "must have all entries > 0"
-
-
-def _divisions(v) -> str | None:
-    ok = all(isinstance(c, int) and not isinstance(c, bool) and c >= 1 for c in v)
-    return None if ok else "must have all entries whole numbers >= 1"
-
-
-def _steps(v) -> str | None:
-    if v < 1:
-        return "must be >= 1"
-    return None if v <= MAX_STEPS else f"must be at most {MAX_STEPS}"
-
-
-def _stiffness(v) -> str | None:
-    if isinstance(v, str):
-        return None if v == "adaptive" else "must be a number of Pa or \"adaptive\""
-    return _positive(v)
-
-
-def _scene_name(v) -> str | None:
-    return None if NAME_PATTERN.fullmatch(v) else (
-        "must be a simple file name (letters, digits, '_', '-', '.'; not starting with '.' "
-        "or '-'; at most 100 characters), since it names the output directory out/<name>")
-
-
-def symlink_loops(path: Path) -> bool:
-    """Whether ``path`` or one of its parents is a symbolic link that never resolves.
-
-    ``Path.resolve()`` raised on a loop up to Python 3.12 and returns the path as it stands
-    from 3.13 on, so the loop is found by asking the OS: ``stat`` of a link in a loop fails
-    with ELOOP on every Python.
-    """
-    for prefix in (path, *path.parents):
-        if prefix.is_symlink():
-            try:
-                os.stat(prefix)
-            except OSError as err:
-                if err.errno == errno.ELOOP:
-                    return True
-    return False
-
-
-def _output_directory(v) -> str | None:
-    """A scene may only write below the working directory (``-o`` may write anywhere)."""
-    if not v or os.path.isabs(v) or v.startswith("~"):
-        return "must be a relative path inside the working directory"
-    parts = os.path.normpath(v).split(os.sep)
-    if parts[0] == ".." or ".." in parts:
-        return "must not leave the working directory (a scene cannot make the program " \
-               "write outside its output directory; use -o)"
-    cwd = Path.cwd().resolve()
-    if symlink_loops(cwd / v):
-        return "must be a path that resolves (a symbolic link loops)"
-    try:
-        inside = (cwd / v).resolve().is_relative_to(cwd)
-    except (OSError, RuntimeError):  # a loop, on Pythons before 3.13 (3.13 does not raise)
-        return "must be a path that resolves (a symbolic link loops)"
-    if not inside:  # through a symbolic link
-        return "must not leave the working directory (it resolves outside it through a " \
-               "symbolic link; use -o)"
-    return None
-
-
-def _check_petsc(table: dict, path: str = "solver.petsc") -> None:
-    """PETSc options: identifier names; string, finite number or boolean values.
-
-    A viewer that writes files (``ksp_view_mat = "binary:/elsewhere"``, ``"ascii:log.txt"``)
-    is refused: a scene cannot make the program write outside its output directory.
-    """
-    for k, value in table.items():
-        where = f"{path}.{_key(k)}"
-        if not PETSC_KEY.fullmatch(k):
-            raise SceneError(f"{where}: PETSc option names are letters, digits and '_'")
-        if isinstance(value, dict):
-            _check_petsc(value, where)
-        elif not isinstance(value, (str, int, float)):  # bool is an int
-            raise SceneError(f"{where} must be a string, a number or true/false, "
-                             f"got {_show(value)}")
-        elif isinstance(value, str):
-            _check_string(where, value)
-            try:
-                number = float(value)
-            except ValueError:
-                number = 0.0
-            if not math.isfinite(number):
-                raise SceneError(f"{where} must be finite, got {_show(value)}")
-            viewer, _, rest = value.partition(":")
-            if viewer.strip().lower() in PETSC_WRITING_VIEWERS or rest.partition(":")[0]:
-                raise SceneError(f"{where} must not name a PETSc viewer that writes files "
-                                 "(give it on the command line), got " + _show(value))
-
-
-def _key(k: str) -> str:
-    """A key as written in a dotted path; odd keys (spaces, newlines, ...) are quoted."""
-    return k if re.fullmatch(r"[\w-]{1,64}", k) else _show(k)
-
-
-def _check_string(path: str, value: str) -> None:
-    if len(value) > MAX_STRING:
-        raise SceneError(f"{path} must be at most {MAX_STRING} characters, got {_show(value)}")
-    if any(ord(c) < 32 or ord(c) == 127 for c in value):
-        raise SceneError(f"{path} must not contain control characters, got {_show(value)}")
-
-
 #: What ``render.color_by`` may name: vertex |displacement|, the cells' mean psi, or one
 #: colour per body (the mesh's connected parts: the ``[[body]]`` tables in order).
 COLOR_FIELDS = ("displacement", "energy_density", "body")
-#: Named camera views (``auto``: ``side`` in 3D, ``xy`` in 2D; see fem_anim/render/process.py).
+#: Named camera views (``auto``: ``side`` in 3D, ``xy`` in 2D; :mod:`fem_anim.render.frames`).
 VIEWS = ("auto", "side", "iso", "xy", "xz", "yz")
 #: What ``render.outputs`` may list: PNG frames, an animated GIF, an MP4 video.
 RENDER_OUTPUTS = ("frames", "gif", "mp4")
 
-
-def _colormap(v) -> str | None:
-    import matplotlib  # only when a scene names a colormap: the default costs no import
-
-    if v in matplotlib.colormaps:
-        return None
-    close = [name for name in matplotlib.colormaps if name.lower() == v.lower()]
-    hint = f" (did you mean {close[0]!r}?)" if close else " (see matplotlib's colormap list)"
-    return "must be a matplotlib colormap name" + hint
-
-
-def _color(v) -> str | None:
-    import matplotlib.colors
-
-    return None if matplotlib.colors.is_color_like(v) else \
-        "must be a colour name or '#rrggbb' (matplotlib's colour names)"
-
-
-def _window_size(v) -> str | None:
-    ok = all(isinstance(c, int) and 16 <= c <= 4096 for c in v)
-    return None if ok else "must be two whole numbers of pixels in 16..4096"
-
-
-def _fps(v) -> str | None:
-    return None if 0 < v <= 240 else "must be in (0, 240] frames per second"
-
-
-def _outputs(v) -> str | None:
-    ok = all(isinstance(c, str) for c in v) and set(v) <= set(RENDER_OUTPUTS) and \
-        len(set(v)) == len(v)
-    return None if ok else f"must be a list of distinct names from {', '.join(RENDER_OUTPUTS)}"
-
-
 NUM = (int, float)
+
+
+@dataclass(frozen=True)
+class Key:
+    """One scene key: its type, default, constraint, unit and meaning.
+
+    Attributes:
+        kind: The Python type(s) of the TOML value (``NUM``: an integer or a float).
+        default: The value when the key is not given; ``None``: required, absent or derived.
+        check: The constraint beyond the type (:mod:`fem_anim.scene.constraints`).
+        length: The allowed list lengths (a list of numbers), or ``None``.
+        choices: The allowed values, or ``None``.
+        unit: The SI unit of the value (``""``: a pure number or not a quantity).
+        doc: What the key means, one line.
+    """
+
+    kind: type | tuple[type, ...]
+    default: Any = None
+    check: c.Check | None = None
+    length: tuple[int, ...] | None = None
+    choices: tuple | None = None
+    unit: str = ""
+    doc: str = ""
+
+
+V = (2, 3)  # a vector of the mesh dimension
 SCHEMA: dict[str, dict[str, Key]] = {
-    "": {"name": Key(str, "scene", _scene_name)},
+    "": {"name": Key(str, "scene", c.scene_name,
+                     doc="the scene's name; names the default output directory out/<name>")},
     "mesh": {
-        "shape": Key(str, "box", _one_of(MESH_SHAPES)),
-        "dim": Key(int, 3, _one_of((2, 3))),
-        "size": Key(list, [1.0, 0.2, 0.2], _all_positive, (2, 3)),
-        "origin": Key(list, None, None, (2, 3)),
-        "radius": Key(NUM, 0.1, _positive),
-        "length": Key(NUM, 0.5, _positive),
-        "minor_radius": Key(NUM, 0.03, _positive),
-        "element_size": Key(NUM, 0.05, _positive),
-        "file": Key(str, None),
-        "divisions": Key(list, None, _divisions, (2, 3)),
+        "shape": Key(str, "box", choices=MESH_SHAPES,
+                     doc="a gmsh shape (2D: rectangle, disk, annulus, stadium) or a mesh file"),
+        "dim": Key(int, 3, choices=(2, 3), doc="3: tetrahedra; 2: triangles, plane strain"),
+        "size": Key(list, [1.0, 0.2, 0.2], c.all_positive, V, unit="m",
+                    doc="box edge lengths (dim entries)"),
+        "origin": Key(list, None, None, V, unit="m", doc="box: lower corner; sphere, torus: "
+                      "centre; cylinder, capsule: centre of the x-min end (default 0)"),
+        "radius": Key(NUM, 0.1, c.positive, unit="m", doc="sphere, cylinder, capsule radius; "
+                      "torus major radius"),
+        "length": Key(NUM, 0.5, c.positive, unit="m", doc="cylinder and capsule length (x)"),
+        "minor_radius": Key(NUM, 0.03, c.positive, unit="m",
+                            doc="torus tube radius (< radius)"),
+        "element_size": Key(NUM, 0.05, c.positive, unit="m", doc="gmsh target edge length"),
+        "file": Key(str, None, unit="", doc="shape = \"file\": a volume mesh meshio reads or "
+                    "a closed STL/OBJ/PLY surface, relative to the scene file"),
+        "divisions": Key(list, None, c.divisions, V, doc="box only: a structured grid of "
+                         "cells per axis, cut into simplices (instead of gmsh)"),
     },
     "element": {
-        "degree": Key(int, 1, _one_of((1, 2))),
-        "quadrature_degree": Key(int, None, lambda v: None if 0 <= v <= 12 else
-                                 "must be in 0..12"),
-        "formulation": Key(str, "displacement", _one_of(FORMULATIONS)),
+        "degree": Key(int, 1, choices=(1, 2), doc="Lagrange degree of the displacement"),
+        "quadrature_degree": Key(int, None, c.in_closed(0, 12, "must be in 0..12"),
+                                 doc="quadrature of the elastic energy (default: the degree)"),
+        "formulation": Key(str, "displacement", choices=FORMULATIONS,
+                           doc="\"mixed\": Taylor-Hood (u, p) for (nearly) incompressible "
+                           "solids, poisson_ratio up to 0.5"),
     },
     "material": {
-        "model": Key(str, "neohookean", _one_of(MATERIAL_MODELS)),
-        "youngs_modulus": Key(NUM, 1.0e5, _positive),
-        # 0.5 passes here; scene_consistency admits it with element.formulation = "mixed" only
+        "model": Key(str, "neohookean", choices=MATERIAL_MODELS,
+                     doc="hyperelastic energy density psi(F) (mooney_rivlin: mixed only)"),
+        "youngs_modulus": Key(NUM, 1.0e5, c.positive, unit="Pa", doc="Young's modulus E"),
+        # 0.5 passes here; the consistency rules admit it with element.formulation = "mixed"
         "poisson_ratio": Key(NUM, 0.3, lambda v: None if v == 0.5 else
-                             _in_open(-1.0, 0.5)(v)),
-        "density": Key(NUM, 1000.0, _positive),
-        "mass": Key(str, "consistent", _one_of(("consistent", "lumped"))),
-        "mooney_ratio": Key(NUM, 0.3, lambda v: None if 0 <= v <= 1 else "must be in [0, 1]"),
+                             c.in_open(-1.0, 0.5)(v),
+                             doc="Poisson's ratio nu in (-1, 0.5); 0.5 with the mixed form"),
+        "density": Key(NUM, 1000.0, c.positive, unit="kg/m^3", doc="mass density rho"),
+        "mass": Key(str, "consistent", choices=("consistent", "lumped"),
+                    doc="mass matrix: consistent, or lumped row sums (P1 only)"),
+        "mooney_ratio": Key(NUM, 0.3, c.in_closed(0, 1, "must be in [0, 1]"),
+                            doc="mooney_rivlin: the Mooney ratio r, the share of the shear "
+                            "modulus in the I2 term (c01 = r mu / 2)"),
     },
     "time": {
-        "integrator": Key(str, "newmark", _one_of(INTEGRATORS)),
-        "dt": Key(NUM, 1.0 / 60.0, _positive),
-        "steps": Key(int, 60, _steps),
-        "adaptive": Key(bool, True),
-        "min_dt": Key(NUM, None, _positive),
+        "integrator": Key(str, "newmark", choices=INTEGRATORS, doc="time integrator"),
+        "dt": Key(NUM, 1.0 / 60.0, c.positive, unit="s", doc="time step, one frame"),
+        "steps": Key(int, 60, c.steps, unit="frames", doc="number of frames to simulate"),
+        "adaptive": Key(bool, True, doc="retry a failed step with dt halved, then grow dt "
+                        "back"),
+        "min_dt": Key(NUM, None, c.positive, unit="s",
+                      doc="floor of adaptive halving (default dt/256)"),
     },
-    "gravity": {"acceleration": Key(list, None, None, (2, 3))},
+    "gravity": {"acceleration": Key(list, None, None, V, unit="m/s^2",
+                                    doc="gravitational acceleration g (dim entries)")},
     "damping": {
-        "alpha": Key(NUM, 0.0, _non_negative),
-        "beta": Key(NUM, 0.0, _non_negative),
+        "alpha": Key(NUM, 0.0, c.non_negative, unit="1/s",
+                     doc="mass-proportional Rayleigh damping: C = alpha M + beta K_0"),
+        "beta": Key(NUM, 0.0, c.non_negative, unit="s",
+                    doc="stiffness-proportional Rayleigh damping: C = alpha M + beta K_0"),
     },
     "pin": {
-        "name": Key(str, "pin"),
-        "min": Key(list, None, None, (2, 3)),
-        "max": Key(list, None, None, (2, 3)),
-        "velocity": Key(list, None, None, (2, 3)),
-        "angular_velocity": Key(NUM, 0.0),
-        "axis": Key(list, None, None, (3,)),
-        "center": Key(list, None, None, (2, 3)),
-        "until": Key(NUM, None, _non_negative),
+        "name": Key(str, "pin", doc="the pin's name in messages"),
+        "min": Key(list, None, None, V, unit="m", doc="lower corner of the box of held "
+                   "vertices"),
+        "max": Key(list, None, None, V, unit="m", doc="upper corner of the box of held "
+                   "vertices"),
+        "velocity": Key(list, None, None, V, unit="m/s",
+                        doc="the held vertices translate at this velocity (a handle)"),
+        "angular_velocity": Key(NUM, 0.0, unit="rad/s",
+                                doc="the held vertices turn about axis through center"),
+        "axis": Key(list, None, None, (3,), doc="rotation axis (3D; required with a "
+                    "rotation)"),
+        "center": Key(list, None, None, V, unit="m", doc="centre of rotation (default: the "
+                      "box centre)"),
+        "until": Key(NUM, None, c.non_negative, unit="s",
+                     doc="the handle stops moving at this time (default: never)"),
     },
     "region": {
-        "name": Key(str, None),
-        "min": Key(list, None, None, (2, 3)),
-        "max": Key(list, None, None, (2, 3)),
-        "model": Key(str, None, _one_of(MATERIAL_MODELS)),
-        "youngs_modulus": Key(NUM, None, _positive),
-        "poisson_ratio": Key(NUM, None, _in_open(-1.0, 0.5)),
-        "density": Key(NUM, None, _positive),
+        "name": Key(str, None, doc="a physical group of the mesh, or with min and max a new "
+                    "name for a box of cells"),
+        "min": Key(list, None, None, V, unit="m", doc="lower corner of the box of cells (by "
+                   "centroid)"),
+        "max": Key(list, None, None, V, unit="m", doc="upper corner of the box of cells (by "
+                   "centroid)"),
+        "model": Key(str, None, choices=MATERIAL_MODELS, doc="material.model on the "
+                     "region's cells"),
+        "youngs_modulus": Key(NUM, None, c.positive, unit="Pa",
+                              doc="material.youngs_modulus on the region's cells"),
+        "poisson_ratio": Key(NUM, None, c.in_open(-1.0, 0.5),
+                             doc="material.poisson_ratio on the region's cells"),
+        "density": Key(NUM, None, c.positive, unit="kg/m^3",
+                       doc="material.density on the region's cells"),
     },
     "initial": {
-        "velocity": Key(list, None, None, (2, 3)),
-        "angular_velocity": Key((int, float, list), None),
-        "center": Key(list, None, None, (2, 3)),
+        "velocity": Key(list, None, None, V, unit="m/s", doc="initial rigid velocity"),
+        "angular_velocity": Key((int, float, list), None, unit="rad/s",
+                                doc="initial angular velocity: a number (2D, about z) or a "
+                                "vector (3D)"),
+        "center": Key(list, None, None, V, unit="m",
+                      doc="centre of the rotation (default: the centre of mass)"),
     },
     "obstacle": {  # static obstacles, contact as a barrier energy (forms/obstacle_contact.py)
-        "name": Key(str, "obstacle"),
-        "type": Key(str, None, _one_of(OBSTACLE_TYPES)),
-        "point": Key(list, None, None, (2, 3)),
-        "normal": Key(list, None, None, (2, 3)),
-        "center": Key(list, None, None, (2, 3)),
-        "radius": Key(NUM, None, _positive),
-        "dhat": Key(NUM, 1.0e-3, _positive),
-        "stiffness": Key(NUM, None, _positive),
-        "friction": Key(NUM, 0.0, _non_negative),
-        "epsv": Key(NUM, 1.0e-3, _positive),
+        "name": Key(str, "obstacle", doc="the obstacle's name in messages"),
+        "type": Key(str, None, choices=OBSTACLE_TYPES, doc="a half space or a ball"),
+        "point": Key(list, None, None, V, unit="m", doc="plane: a point of the plane "
+                     "(default 0)"),
+        "normal": Key(list, None, None, V, doc="plane: the normal pointing into the free "
+                      "side"),
+        "center": Key(list, None, None, V, unit="m", doc="sphere: its centre"),
+        "radius": Key(NUM, None, c.positive, unit="m", doc="sphere: its radius"),
+        "dhat": Key(NUM, 1.0e-3, c.positive, unit="m", doc="barrier activation distance"),
+        "stiffness": Key(NUM, None, c.positive, unit="Pa",
+                         doc="barrier stiffness kappa (default: youngs_modulus)"),
+        "friction": Key(NUM, 0.0, c.non_negative, doc="Coulomb friction coefficient mu"),
+        "epsv": Key(NUM, 1.0e-3, c.positive, unit="m/s",
+                    doc="sliding speed below which friction is a stiff viscous stick"),
     },
     "body": {  # one of several bodies (fem_anim/mesh/bodies.py); sub-tables as at the top level
-        "name": Key(str, None, lambda v: None if NAME_PATTERN.fullmatch(v) else
-                    "must be a simple name (letters, digits, '_', '-', '.'; at most 100 "
-                    "characters)"),
-        "offset": Key(list, None, None, (2, 3)),
-        "rotation": Key(list, None, None, (1, 3)),
+        "name": Key(str, None, c.body_name, doc="the body's name (unique)"),
+        "offset": Key(list, None, None, V, unit="m", doc="translation of the body's mesh"),
+        "rotation": Key(list, None, None, (1, 3), unit="degrees",
+                        doc="rotation of the body's mesh about x, then y, then z (2D: one "
+                        "angle)"),
     },
     "contact": {  # contact between bodies and of a body with itself (fem_anim/contact/ipc.py)
-        "self": Key(bool, True),
-        "dhat": Key(NUM, 1.0e-3, _positive),
-        "stiffness": Key((int, float, str), "adaptive", _stiffness),
-        "friction": Key(NUM, 0.0, _non_negative),
-        "epsv": Key(NUM, 1.0e-3, _positive),
+        "self": Key(bool, True, doc="each body also repels itself"),
+        "dhat": Key(NUM, 1.0e-3, c.positive, unit="m", doc="barrier activation distance"),
+        "stiffness": Key((int, float, str), "adaptive", c.stiffness, unit="Pa",
+                         doc="barrier stiffness kappa, or \"adaptive\" (IPC's schedule)"),
+        "friction": Key(NUM, 0.0, c.non_negative, doc="Coulomb friction coefficient mu"),
+        "epsv": Key(NUM, 1.0e-3, c.positive, unit="m/s",
+                    doc="sliding speed below which friction is a stiff viscous stick"),
     },
     "solver": {
-        "mode": Key(str, "exact", _one_of(SOLVER_MODES)),
-        "preset": Key(str, "cholesky"),
-        "method": Key(str, "newton", _one_of(NONLINEAR_METHODS)),
-        "stopping": Key(str, "norm", _one_of(("norm", "decrement"))),
-        "decrement_tol": Key(NUM, 1e-14, _positive),
-        "hessian": Key(str, "exact", _one_of(HESSIAN_MODES)),
-        "forcing": Key(str, "tight", _one_of(("tight", "adaptive"))),
-        "inversion_filter": Key(bool, None),
-        "max_iterations": Key(int, None, lambda v: None if v >= 1 else "must be >= 1"),
-        "on_budget": Key(str, "fail", _one_of(("fail", "accept"))),
-        "hessian_update": Key(str, "every_iteration", _one_of(HESSIAN_UPDATES)),
-        "hessian_lag": Key(int, 2, lambda v: None if v >= 1 else "must be >= 1"),
-        "petsc": Key(dict, {}, _check_petsc),
+        "mode": Key(str, "exact", choices=tuple(SOLVER_MODES),
+                    doc="\"exact\": Newton to convergence; \"preview\": one Newton step per "
+                    "frame"),
+        "preset": Key(str, "cholesky", doc="linear solver preset (fem-anim solvers lists "
+                      "them)"),
+        "method": Key(str, "newton", choices=NONLINEAR_METHODS, doc="the minimiser"),
+        "stopping": Key(str, "norm", choices=("norm", "decrement"),
+                        doc="residual-norm tests, or the Newton decrement"),
+        "decrement_tol": Key(NUM, 1e-14, c.positive,
+                             doc="stopping = \"decrement\": lambda^2/2 at most this, in the "
+                             "units of the step objective g"),
+        "hessian": Key(str, "exact", choices=HESSIAN_MODES,
+                       doc="Newton's Hessian, or a filtered one (when not given, solver.mode "
+                       "fills \"auto\" where it applies)"),
+        "forcing": Key(str, "tight", choices=("tight", "adaptive"),
+                       doc="Krylov tolerance per Newton iteration: fixed, or Eisenstat-Walker"),
+        "inversion_filter": Key(bool, None, doc="halve Newton steps that invert an element "
+                                "(default: on for neo-Hookean)"),
+        "max_iterations": Key(int, None, c.at_least_one,
+                              doc="a budget of Newton iterations per step"),
+        "on_budget": Key(str, "fail", choices=("fail", "accept"),
+                         doc="a step past the budget fails, or is kept if it lowered g"),
+        "hessian_update": Key(str, "every_iteration", choices=HESSIAN_UPDATES,
+                              doc="how often the Hessian is rebuilt"),
+        "hessian_lag": Key(int, 2, c.at_least_one, doc="iterations a \"lagged\" Hessian "
+                           "serves"),
+        "petsc": Key(dict, {}, c.check_petsc, doc="PETSc options without prefix (nested "
+                     "tables flattened)"),
     },
     "output": {
-        "directory": Key(str, None, _output_directory),
-        "every": Key(int, 1, lambda v: None if v >= 1 else "must be >= 1"),
-        "checkpoint_every": Key(int, None, lambda v: None if v >= 1 else "must be >= 1"),
-        "render": Key(bool, True),
+        "directory": Key(str, None, c.output_directory,
+                         doc="output directory, relative (default out/<name>; -o wins)"),
+        "every": Key(int, 1, c.at_least_one, unit="frames", doc="write every n-th frame"),
+        "checkpoint_every": Key(int, None, c.at_least_one, unit="frames",
+                                doc="frames between checkpoints (default steps/10)"),
+        "render": Key(bool, True, doc="render the run's pictures when it ends"),
     },
     "render": {
-        "color_by": Key(str, "displacement", _one_of(COLOR_FIELDS)),
-        "colormap": Key(str, "viridis", _colormap),
-        "view": Key(str, "auto", _one_of(VIEWS)),
-        "camera_position": Key(list, None, None, (3,)),
-        "focal_point": Key(list, None, None, (3,)),
-        "view_up": Key(list, None, lambda v: None if any(v) else "must not be the zero vector",
-                       (3,)),
-        "background": Key(str, "white", _color),
-        "window_size": Key(list, [800, 600], _window_size, (2,)),
-        "fps": Key(NUM, None, _fps),
-        "outputs": Key(list, list(RENDER_OUTPUTS), _outputs),
-        "show_edges": Key(bool, True),
+        "color_by": Key(str, "displacement", choices=COLOR_FIELDS,
+                        doc="colour by |u|, by the cells' energy density, or one colour per "
+                        "body"),
+        "colormap": Key(str, "viridis", c.colormap, doc="a matplotlib colormap name"),
+        "view": Key(str, "auto", choices=VIEWS, doc="camera direction, fitted to the run"),
+        "camera_position": Key(list, None, None, (3,), unit="m", doc="an explicit camera "
+                               "position"),
+        "focal_point": Key(list, None, None, (3,), unit="m",
+                           doc="where the camera looks (default: the run's centre)"),
+        "view_up": Key(list, None, c.nonzero_vector, (3,), doc="the camera's up direction "
+                       "(default z)"),
+        "background": Key(str, "white", c.color, doc="a matplotlib colour or \"#rrggbb\""),
+        "window_size": Key(list, [800, 600], c.window_size, (2,), unit="px",
+                           doc="picture width and height"),
+        "fps": Key(NUM, None, c.fps, unit="frames/s",
+                   doc="GIF and MP4 frame rate (default: real time, within 1..60)"),
+        "outputs": Key(list, list(RENDER_OUTPUTS), c.distinct_names(RENDER_OUTPUTS),
+                       doc="which animations to write ([]: final.png and plots only)"),
+        "show_edges": Key(bool, True, doc="draw the cell edges"),
     },
+}
+#: How each table is written in TOML, and what it is, one line.
+SECTIONS: dict[str, tuple[str, str]] = {
+    "": ("", "top-level keys"),
+    "mesh": ("[mesh]", "the body's mesh: a gmsh shape or a file"),
+    "element": ("[element]", "the finite element"),
+    "material": ("[material]", "the body's hyperelastic material"),
+    "time": ("[time]", "time stepping"),
+    "gravity": ("[gravity]", "gravity (absent: none)"),
+    "damping": ("[damping]", "Rayleigh damping (absent: none)"),
+    "pin": ("[[pin]]", "boxes of held vertices, possibly moving (handles)"),
+    "region": ("[[region]]", "parts of the mesh with their own material keys"),
+    "initial": ("[initial]", "a rigid initial velocity (absent: at rest)"),
+    "obstacle": ("[[obstacle]]", "static obstacles with barrier contact"),
+    "body": ("[[body]]", "one of several bodies, with its own [body.mesh], [body.material], "
+             "[body.initial], [[body.pin]] and [[body.region]] (keys as at the top level)"),
+    "contact": ("[contact]", "IPC contact between surfaces (on by default with several "
+                "bodies)"),
+    "solver": ("[solver]", "the minimiser of each step and its linear solver"),
+    "output": ("[output]", "what is written"),
+    "render": ("[render]", "the pictures and animations"),
 }
 #: Sections that exist only when a scene declares them (physical terms).
 OPTIONAL_SECTIONS = ("gravity", "damping", "initial", "contact")
@@ -384,306 +306,65 @@ DEFAULTS: dict[str, dict[str, Any]] = {
 }
 
 
-@dataclass
-class Scene:
-    """A validated scene: plain nested dictionaries plus where it came from."""
+@dataclass(frozen=True)
+class KeyInfo:
+    """One scene key as a reader sees it (a row of the scene reference).
 
-    data: dict[str, Any]
-    source: str = "<default scene>"
-    base_dir: Path = field(default_factory=Path.cwd)
+    Attributes:
+        section: The table's name in :data:`SCHEMA` (``""``: top level).
+        table: The table as written in TOML (``"[mesh]"``, ``"[[pin]]"``, ``""``).
+        name: The key.
+        path: The dotted path of messages and ``--set`` (``"pin[i].min"`` for arrays).
+        type: The type in words (``"list of 2 or 3 numbers"``).
+        default: The default value; ``None``: none (see ``required``).
+        required: Whether a declared table must give it.
+        unit: The SI unit (``""``: a pure number or not a quantity).
+        choices: The allowed values, or ``None``.
+        doc: The meaning, one line.
+    """
 
-    def __getitem__(self, section: str) -> Any:
-        return self.data[section]
-
-    def get(self, section: str, default: Any = None) -> Any:
-        return self.data.get(section, default)
-
-    @property
-    def name(self) -> str:
-        return self.data["name"]
-
-    @property
-    def dim(self) -> int:
-        return self.data["mesh"]["dim"]
-
-    @property
-    def damped(self) -> bool:
-        """A ``[damping]`` section with a positive coefficient (alpha = beta = 0: no term)."""
-        damping = self.data.get("damping")
-        return damping is not None and (damping["alpha"] > 0 or damping["beta"] > 0)
-
-
-def default_scene_text() -> str:
-    """The TOML text of the embedded default scene (the hanging beam)."""
-    return resources.files("fem_anim").joinpath("default_scene.toml").read_text()
+    section: str
+    table: str
+    name: str
+    path: str
+    type: str
+    default: Any
+    required: bool
+    unit: str
+    choices: tuple | None
+    doc: str
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """Parse one ``--set KEY=VALUE``; the value is TOML, a bare word is taken as a string."""
-    if "=" not in text:
-        raise SceneError(f"--set expects KEY=VALUE, got {text!r}")
-    key, raw = text.split("=", 1)
-    path = key.strip().split(".")
-    if not all(re.fullmatch(r"[\w-]+", part) for part in path):
-        raise SceneError(f"--set key {key!r} is not a dotted key path")
-    try:
-        value = _parse_toml(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        if raw.strip().replace("_", "").replace("-", "").isalnum():
-            value = raw.strip()
-        else:
-            raise SceneError(f"--set {key}: value {raw!r} is not valid TOML") from None
-    return path, value
+def type_text(key: Key) -> str:
+    """A key's type in words: ``"number"``, ``"list of 2 or 3 numbers"``, ..."""
+    if key.kind is list and key.length is not None:
+        return f"list of {' or '.join(map(str, key.length))} numbers"
+    names = {int: "integer", float: "number", str: "string", list: "list", dict: "table",
+             bool: "boolean"}
+    if isinstance(key.kind, tuple):
+        return " or ".join(dict.fromkeys(names[k] for k in key.kind)).replace(
+            "integer or number", "number")
+    return names[key.kind]
 
 
-def _apply_override(data: dict, path: list[str], value: Any) -> None:
-    node = data
-    for i, part in enumerate(path[:-1]):
-        if isinstance(node, list):
-            if not part.isdecimal():
-                raise SceneError(f"--set {'.'.join(path)}: {'.'.join(path[:i])} is a list; "
-                                 f"give an entry number, e.g. {'.'.join(path[:i])}.0")
-            idx = int(part)
-            if idx >= len(node):
-                raise SceneError(f"--set {'.'.join(path)}: there is no entry {idx} in "
-                                 f"{'.'.join(path[:i])}")
-            node = node[idx]
-            if not isinstance(node, (dict, list)):
-                raise SceneError(f"--set {'.'.join(path)}: {'.'.join(path[:i + 1])} is not a "
-                                 "table")
-            continue
-        nxt = node.setdefault(part, {})
-        if not isinstance(nxt, (dict, list)):
-            raise SceneError(f"--set {'.'.join(path)}: {'.'.join(path[:i + 1])} is not a table")
-        node = nxt
-    if not isinstance(node, dict):
-        raise SceneError(f"--set {'.'.join(path)}: cannot set a key inside a list")
-    node[path[-1]] = value
+def scene_keys() -> Iterator[KeyInfo]:
+    """Every key of a scene file, table by table, in :data:`SCHEMA`'s order.
 
+    The keys of ``[[body]]``'s sub-tables are those of the top-level tables (listed once).
 
-def _type_name(kind) -> str:
-    names = {int: "an integer", float: "a number", str: "a string", list: "a list",
-             dict: "a table", bool: "true or false"}
-    if isinstance(kind, tuple):
-        return "a number"
-    return names.get(kind, kind.__name__)
+    Yields:
+        One :class:`KeyInfo` per key.
 
-
-def _check_finite(path: str, value: Any) -> None:
-    if isinstance(value, bool):
-        return
-    if isinstance(value, (int, float)):
-        if isinstance(value, float) and not math.isfinite(value):
-            raise SceneError(f"{path} must be finite, got {value}")
-        if abs(value) > MAX_MAGNITUDE:
-            shown = f"{value:g}" if isinstance(value, float) else _show(value)
-            raise SceneError(f"{path} must be at most {MAX_MAGNITUDE:g} in magnitude, "
-                             f"got {shown}")
-        if value and abs(value) < 1.0 / MAX_MAGNITUDE:  # dt / 256 would underflow to 0
-            raise SceneError(f"{path} must be 0 or at least {1.0 / MAX_MAGNITUDE:g} in "
-                             f"magnitude, got {value:g}")
-    elif isinstance(value, list):
-        for i, v in enumerate(value):
-            _check_finite(f"{path}[{i}]", v)
-    elif isinstance(value, dict):
-        for k, v in value.items():
-            _check_finite(f"{path}.{_key(k)}", v)
-
-
-def _validate_table(section: str, table: Any, keys: dict[str, Key], where: str) -> dict:
-    if not isinstance(table, dict):
-        raise SceneError(f"{where} must be a table, got {_show(table)}")
-    for k in table:
-        if k not in keys:
-            raise SceneError(f"unknown key {where}.{_key(k)} (known: {', '.join(keys)})".replace(
-                "unknown key .", "unknown key "))
-    out = {}
-    for k, key in keys.items():
-        path = f"{where}.{k}" if where else k
-        if k not in table:
-            if section in REQUIRED and k in REQUIRED[section]:
-                raise SceneError(f"{path} is required")
-            out[k] = key.default
-            continue
-        value = table[k]
-        ok = isinstance(value, key.kind) and not (isinstance(value, bool) and key.kind is not bool)
-        if key.kind is NUM and isinstance(value, bool):
-            ok = False
-        if not ok:
-            raise SceneError(f"{path} must be {_type_name(key.kind)}, got {_show(value)}")
-        _check_finite(path, value)
-        if isinstance(value, str):
-            _check_string(path, value)
-        if key.length is not None:
-            if len(value) not in key.length or not all(
-                    isinstance(c, NUM) and not isinstance(c, bool) for c in value):
-                raise SceneError(f"{path} must be a list of {' or '.join(map(str, key.length))}"
-                                 f" numbers, got {_show(value)}")
-        if key.check is not None and (msg := key.check(value)):
-            raise SceneError(f"{path} {msg}, got {_show(value)}")
-        out[k] = value
-    return out
-
-
-def _validate(raw: Mapping[str, Any]) -> dict[str, Any]:
-    known = ["name"] + [section for section in SCHEMA if section]
-    for name in raw:
-        if name not in known:
-            raise SceneError(f"unknown section or key {_show(name)} (known: {', '.join(known)})")
-    data = _validate_table("", {"name": raw["name"]} if "name" in raw else {}, SCHEMA[""], "")
+    Examples:
+        >>> from fem_anim.scene import scene_keys
+        >>> key = next(k for k in scene_keys() if k.path == "material.youngs_modulus")
+        >>> key.type, key.default, key.unit
+        ('number', 100000.0, 'Pa')
+    """
     for section, keys in SCHEMA.items():
-        if not section:
-            continue
-        if section == "body":
-            data["body"] = _validate_bodies(raw)
-        elif section in ARRAY_SECTIONS:
-            entries = raw.get(section, [])
-            if not isinstance(entries, list):
-                raise SceneError(f"{section} must be an array of tables ([[{section}]]), "
-                                 f"got {_show(entries)}")
-            data[section] = [_validate_table(section, e, keys, f"{section}[{i}]")
-                             for i, e in enumerate(entries)]
-        elif section in OPTIONAL_SECTIONS:
-            if section in raw:
-                data[section] = _validate_table(section, raw[section], keys, section)
-        else:
-            data[section] = _validate_table(section, raw.get(section, {}), keys, section)
-    if data["body"]:
-        data["mesh"] = dict(data["mesh"], dim=data["body"][0]["mesh"]["dim"])
-        data["material"] = dict(data["body"][0]["material"])
-        if len(data["body"]) > 1 and "contact" not in data:
-            data["contact"] = {k: key.default for k, key in SCHEMA["contact"].items()}
-    check_consistency(data)
-    return data
-
-
-def _validate_bodies(raw: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """``[[body]]`` tables: their own keys, then each sub-table with its top-level schema.
-
-    With bodies the top-level tables that describe one body may not be given (their
-    meaning would be ambiguous): each body carries its own.
-    """
-    entries = raw.get("body", [])
-    if not isinstance(entries, list):
-        raise SceneError(f"body must be an array of tables ([[body]]), got {_show(entries)}")
-    if entries:
-        for section in BODY_TABLES + BODY_ARRAYS:
-            if section in raw:
-                raise SceneError(f"{section} must not be given at the top level with [[body]] "
-                                 f"tables: give it in each body (body[i].{section})")
-    bodies = []
-    for i, entry in enumerate(entries):
-        where = f"body[{i}]"
-        if not isinstance(entry, dict):
-            raise SceneError(f"{where} must be a table, got {_show(entry)}")
-        for k in entry:
-            if k not in SCHEMA["body"] and k not in BODY_TABLES + BODY_ARRAYS:
-                known = ", ".join([*SCHEMA["body"], *BODY_TABLES, *BODY_ARRAYS])
-                raise SceneError(f"unknown key {where}.{_key(k)} (known: {known})")
-        own = {k: v for k, v in entry.items() if k not in BODY_TABLES + BODY_ARRAYS}
-        body = _validate_table("body", own, SCHEMA["body"], where)
-        for section in BODY_TABLES:
-            if section == "initial" and section not in entry:
-                continue
-            body[section] = _validate_table(section, entry.get(section, {}), SCHEMA[section],
-                                            f"{where}.{section}")
-        for section in BODY_ARRAYS:
-            items = entry.get(section, [])
-            if not isinstance(items, list):
-                raise SceneError(f"{where}.{section} must be an array of tables "
-                                 f"([[body.{section}]]), got {_show(items)}")
-            body[section] = [_validate_table(section, e, SCHEMA[section], f"{where}.{section}[{j}]")
-                             for j, e in enumerate(items)]
-        bodies.append(body)
-    return bodies
-
-
-def _parse_toml(text: str) -> dict[str, Any]:
-    """``tomllib.loads``, with its non-TOML failures turned into ``TOMLDecodeError``."""
-    try:
-        return tomllib.loads(text)
-    except RecursionError:
-        raise tomllib.TOMLDecodeError("arrays or tables nested too deeply") from None
-    except ValueError as err:  # an integer longer than Python converts (4300 digits)
-        if isinstance(err, tomllib.TOMLDecodeError):
-            raise
-        raise tomllib.TOMLDecodeError(f"a number has too many digits ({err})".split(
-            "; use sys.set_int_max_str_digits")[0]) from None
-
-
-def _read_scene_file(p: Path) -> str:
-    """The text of a scene file: a regular UTF-8 file of at most ``MAX_FILE_BYTES``."""
-    try:
-        mode = p.stat().st_mode
-    except FileNotFoundError:
-        raise SceneError(f"scene file {p} does not exist") from None
-    except OSError as err:
-        raise SceneError(f"scene file {p} cannot be read: {err.strerror}") from None
-    if stat.S_ISDIR(mode):
-        raise SceneError(f"scene file {p} is a directory")
-    if not stat.S_ISREG(mode):  # a FIFO or device would block or never end
-        raise SceneError(f"scene file {p} is not a regular file")
-    try:
-        with open(p, "rb") as f:
-            data = f.read(MAX_FILE_BYTES + 1)
-    except OSError as err:
-        raise SceneError(f"scene file {p} cannot be read: {err.strerror}") from None
-    if len(data) > MAX_FILE_BYTES:
-        raise SceneError(f"scene file {p} is larger than {MAX_FILE_BYTES} bytes: not a scene")
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise SceneError(f"scene file {p} is not UTF-8 text (byte {err.start}: "
-                         f"{data[err.start:err.start + 1]!r})") from None
-    return text
-
-
-def load_scene(path: str | Path | None = None, overrides: list[str] = ()) -> Scene:
-    """Read, override and validate a scene; ``path=None`` gives the default scene.
-
-    Raises:
-        SceneError: naming the file, key path, constraint and value.
-    """
-    if path is None:
-        text, source, base = default_scene_text(), "<default scene>", Path.cwd()
-    else:
-        p = Path(path)
-        text = _read_scene_file(p)
-        source, base = str(p), p.resolve().parent
-    try:
-        raw = _parse_toml(text)
-    except tomllib.TOMLDecodeError as err:
-        raise SceneError(f"scene file {source} is not valid TOML: {err}") from None
-    if not raw and path is not None:  # an empty file is a mistake, not the defaults
-        raise SceneError(f"scene file {source} is empty (no keys)")
-    for item in overrides:
-        key_path, value = parse_override(item)
-        _apply_override(raw, key_path, value)
-    apply_solver_mode(raw)  # solver.mode fills the solver keys the scene left out
-    try:
-        data = _validate(raw)
-    except SceneError as err:
-        raise SceneError(f"{source}: {err}") from None
-    return Scene(data=data, source=source, base_dir=base)
-
-
-def validate_render(saved: Mapping[str, Any] | None, overrides: list[str] = ()) -> dict[str, Any]:
-    """The ``[render]`` settings of a saved run, with ``--set render.KEY=VALUE`` applied.
-
-    ``fem-anim render OUTDIR`` re-renders a run with the settings it was run with
-    (``scene.json``), changed only by ``render.*`` overrides: the simulation is not redone,
-    so other keys cannot change.
-
-    Raises:
-        SceneError: for an override outside ``render``, or a bad value (naming the key).
-    """
-    table = {"render": {k: v for k, v in (saved or {}).items() if v is not None}}
-    for item in overrides:
-        path, value = parse_override(item)
-        if path[0] != "render" or len(path) != 2:
-            raise SceneError(f"--set {'.'.join(path)}: only render.* keys can change when a "
-                             "saved run is rendered again (run the scene to change others)")
-        _apply_override(table, path, value)
-    render = _validate_table("render", table["render"], SCHEMA["render"], "render")
-    check_render(render)
-    return render
+        table = SECTIONS[section][0]
+        for name, key in keys.items():
+            prefix = f"{section}[i]." if section in ARRAY_SECTIONS + ("body",) else \
+                (f"{section}." if section else "")
+            yield KeyInfo(section, table, name, prefix + name, type_text(key), key.default,
+                          name in REQUIRED.get(section, ()), key.unit, key.choices, key.doc)
