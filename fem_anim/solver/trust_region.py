@@ -249,7 +249,7 @@ class NewtonCGTrustRegion:
 
     def descent_direction(self, x: PETSc.Vec, y: PETSc.Vec, r: PETSc.Vec) -> bool:
         """``auto`` with CG: replace an ascent direction y of a failed CG solve by the
-        abs-filtered Newton direction (solves M + w K_|.| y = r); whether y was replaced.
+        abs-filtered Newton direction (solves ``(M + w K_abs) y = r``); whether y was replaced.
 
         PETSc's KSPCG (3.18 to 3.22) declares ``DIVERGED_INDEFINITE_MAT`` on a *change of
         sign* of p^T A p between two directions: when the first direction already has
