@@ -487,7 +487,7 @@ def test_mpi_equals_serial(tmp_path, hessian):
 
 @pytest.mark.mpi
 def test_trust_region_under_mpi():
-    """``tests/mpi_trust_region_check.py``: the crushed StVK cube with cg-icc and auto on 2
+    """``tests/mpi/mpi_trust_region_check.py``: the crushed StVK cube with cg-icc and auto on 2
     ranks (block-Jacobi ICC of the AIJ copy; the radius and KSPSTCG's model value are the
     same on every rank, checked) takes trust-region iterations on both ranks, converges every
     step, crushes the cube to its press, and reaches the serial run's first minimiser."""
@@ -499,7 +499,7 @@ def test_trust_region_under_mpi():
     mpirun = mpirun_command(2)
     if mpirun is None:
         pytest.skip("mpirun not available")
-    script = str(ROOT / "tests" / "mpi_trust_region_check.py")
+    script = str(ROOT / "tests" / "mpi" / "mpi_trust_region_check.py")
     out = {}
     for ranks, prefix in ((1, []), (2, mpirun)):
         r = subprocess.run([*prefix, sys.executable, script], capture_output=True, text=True,

@@ -21,9 +21,9 @@ every selected test exists, so the list cannot rot silently when the code change
 
 Usage::
 
-    .venv/bin/python tests/mutation_check.py             # all mutations, with baselines
-    .venv/bin/python tests/mutation_check.py --list      # names and selections
-    .venv/bin/python tests/mutation_check.py --only friction-pressure-dhat sphere-curvature-sign
+    .venv/bin/python tests/tools/mutation_check.py             # all mutations, with baselines
+    .venv/bin/python tests/tools/mutation_check.py --list      # names and selections
+    .venv/bin/python tests/tools/mutation_check.py --only friction-pressure-dhat  # one
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 __all__ = ["Mutation", "MUTATIONS", "ROOT", "copy_tree", "main"]
 
@@ -387,7 +387,8 @@ def verify_isolation(scratch: Path) -> None:
         raise SystemExit("mutation_check: a broken fem_anim in the scratch copy still imports; "
                          "the tests would not see the mutations")
     where = subprocess.run(
-        [sys.executable, "-c", "import fem_anim, fem_anim.forms.obstacle_contact as c, fem_anim.solver.minimiser as s;"
+        [sys.executable, "-c",
+         "import fem_anim, fem_anim.forms.obstacle_contact as c, fem_anim.solver.minimiser as s;"
          "print(fem_anim.__file__); print(c.__file__); print(s.__file__)"],
         cwd=scratch, env=environment(scratch), capture_output=True, text=True, check=True)
     for line in where.stdout.split():
