@@ -1,4 +1,4 @@
-"""The mixed (u, p) energy of ``fem_anim/forms/incompressible.py`` on a P1/P1 mesh, in numpy.
+"""The mixed (u, p) energy of :mod:`fem_anim.forms.incompressible` on a P1/P1 mesh, in numpy.
 
 The perturbed Lagrangian (Taylor-Hood in the solver; here both fields are P1, so that every
 integral is exact with the reference's one-point kinematics)

@@ -1,4 +1,7 @@
-"""Contact barrier against static obstacles, in numpy (the oracle for :mod:`forms.contact`).
+"""Contact barrier against static obstacles, in numpy.
+
+The oracle for :mod:`fem_anim.forms.obstacle_contact` and
+:class:`fem_anim.contact.obstacles.ObstacleContact`.
 
 For P1 the contact energy is integrated with the vertex rule on the boundary facets, so
 
@@ -14,8 +17,8 @@ An obstacle is a dict as in the scene's ``[[obstacle]]`` table: ``type`` ``"plan
 (``point``, ``normal``) or ``"sphere"`` (``center``, ``radius``), with ``dhat`` and
 ``stiffness``. Positions ``x`` are dof vectors, vertex-major (:mod:`.geometry`).
 
-Lagged friction (IPC section 5; :mod:`fem_anim.forms.obstacle_contact`) with the same vertex rule:
-with x_n the positions at the start of the step, p_v = -kappa/d_hat b'(d(x_{n,v})) the
+Lagged friction (IPC section 5; :mod:`fem_anim.forms.obstacle_contact`) with the same vertex
+rule: with x_n the positions at the start of the step, p_v = -kappa/d_hat b'(d(x_{n,v})) the
 frozen pressure, n_v the obstacle's unit normal at x_{n,v} (plane: n; sphere:
 (x_{n,v} - c)/|x_{n,v} - c|), u_v = (I - n_v n_v^T)(x_v - x_{n,v}) and y_v = |u_v|,
 
@@ -24,8 +27,9 @@ frozen pressure, n_v the obstacle's unit normal at x_{n,v} (plane: n; sphere:
 f0(y) = -y^3/(3 eps^2) + y^2/eps + eps/3 and f1(y) = f0'(y) = 2y/eps - y^2/eps^2 below
 eps, f0 = y and f1 = 1 above (so f1(y)/y = 2/eps - y/eps^2 stays finite at y = 0).
 The sphere's Hessian with the curvature term b' Hess d dropped (IPC's projection of the
-negative tangential eigenvalues, :meth:`fem_anim.contact.obstacles.ObstacleContact.curvature_correction`)
-is :func:`contact_hessian` with ``projected=True``.
+negative tangential eigenvalues,
+:meth:`fem_anim.contact.obstacles.ObstacleContact.curvature_correction`) is
+:func:`contact_hessian` with ``projected=True``.
 """
 
 from __future__ import annotations
