@@ -1,8 +1,9 @@
 """Meshes a user asks for: gmsh primitives, mesh files, closed surfaces, and bad meshes.
 
 Volumes are summed in numpy over the same points and cells DOLFINx is given and compared
-with the analytic ones: curved boundaries are inscribed polygons, so the relative shortfall is about ``(h / rho)^2 / 3`` for element size ``h`` and smallest radius
-of curvature ``rho``; the tolerance is ``(h / rho)^2 / 2``.
+with the analytic ones: curved boundaries are inscribed polygons, so the relative shortfall
+is about ``(h / rho)^2 / 3`` for element size ``h`` and smallest radius of curvature
+``rho``; the tolerance is ``(h / rho)^2 / 2``.
 """
 
 from __future__ import annotations
