@@ -71,8 +71,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def resume_command(argv: list[str], out: str) -> str:
-    """The command that continues an interrupted run: the same arguments (scene,
-    ``--set``, ``--solver``, PETSc options) with ``--resume OUT`` for ``-o``/``--resume``."""
+    """The command that continues an interrupted run.
+
+    Args:
+        argv: The interrupted run's arguments after ``fem-anim run``.
+        out: Its output directory.
+
+    Returns:
+        ``fem-anim run`` with the same arguments (scene, ``--set``, ``--solver``, PETSc
+        options) without ``-o``/``--resume``, then ``--resume OUT``; shell-quoted.
+    """
     import shlex
 
     kept, skip = [], False
