@@ -1,4 +1,4 @@
-"""README's table of ``solver.hessian_update`` and the budget, side by side in one process.
+"""A table of ``solver.hessian_update`` and the budget options, side by side in one process.
 
 Usage (from the repository's top; the default scene unless a scene file is given)::
 

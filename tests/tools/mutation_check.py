@@ -71,7 +71,7 @@ REF = "tests/test_reference_comparison.py"
 MODES = "tests/test_hessian_modes.py"
 
 MUTATIONS: list[Mutation] = [
-    # -- the six bugs of issue 19 ------------------------------------------------------------
+    # -- six bugs the independent checks were written to catch --------------------------------
     Mutation("friction-pressure-dhat", "forms/obstacle_contact.py",
              "- (d - dhat) ** 2 / d, 0.0)", "- (d - dhat) ** 2 / dhat, 0.0)",
              (f"{IND}::test_friction_matches_reference",),
@@ -223,7 +223,7 @@ MUTATIONS: list[Mutation] = [
              "return -y ** 3 / (3.0 * eps ** 2) + y ** 2 / eps + eps / 2.0",
              (f"{IND}::test_reference_friction_gradient_by_finite_differences",),
              "reference f0 discontinuous at eps"),
-    # -- extremes: expectations derived from the scene (issue 19 point 4) --------------------
+    # -- extremes: expectations derived from the scene ---------------------------------------
     Mutation("extremes-pin-sign", "fem_anim/bench/extremes.py",
              "    return v * (t if until is None else min(t, until))",
              "    return -v * (t if until is None else min(t, until))",
