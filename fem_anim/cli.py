@@ -1,11 +1,18 @@
 """The ``fem-anim`` command line.
 
-    fem-anim run [SCENE.toml] [-o OUTDIR] [--set KEY=VALUE ...] [--solver NAME] [--preview] [--quiet]
-                 [PETSc options ...]
+Usage::
+
+    fem-anim run [SCENE.toml] [-o OUTDIR] [--set KEY=VALUE ...] [--solver NAME] [--preview]
+                 [--quiet] [--resume OUTDIR] [PETSc options ...]
     fem-anim render OUTDIR [--set render.KEY=VALUE ...] [--quiet]
     fem-anim solvers
     fem-anim bench [SCENE.toml] [--sweep KEY=V1,V2,...]... [--repeats N] [--reference KEY=V]...
                    [-o OUTDIR] | --extremes [--full] | --perf ... | --hard [--reduced]
+
+``run`` simulates a scene (each time step minimises the step objective g(x) of seed
+section 3.1, eq. 4) and writes its run directory; ``render`` draws a saved run again;
+``solvers`` lists the linear solver presets; ``bench`` runs the benchmarks of
+:mod:`fem_anim.bench`.
 
 PETSc options (``-snes_*``, ``-ksp_*``, ``-pc_*``, ``-mat_*`` and global ones such as
 ``-log_view``) are split off before argparse sees the arguments and reach the step
@@ -29,6 +36,11 @@ EXIT_USAGE = 2
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``run``, ``render`` and ``solvers`` (``bench`` parses its own).
+
+    Returns:
+        A parser whose errors are one ``fem-anim: error:`` line and exit code 2.
+    """
     parser = OneLineParser(prog="fem-anim", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     run = sub.add_parser("run", help="simulate a scene (default: the hanging beam)")
@@ -39,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--solver", help="linear solver preset (see `fem-anim solvers`)")
     run.add_argument("--preview", action="store_true",
                      help="solver.mode = \"preview\": one Newton step per time step, fast and "
-                          "approximate (README \"A preview faster and better than VBD\")")
+                          "approximate")
     run.add_argument("-q", "--quiet", action="store_true",
                      help="no progress bar and no summary: print only warnings and errors")
     run.add_argument("--resume", metavar="OUTDIR",
@@ -59,8 +71,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def resume_command(argv: list[str], out: str) -> str:
-    """The command that continues an interrupted run: the same arguments (scene,
-    ``--set``, ``--solver``, PETSc options) with ``--resume OUT`` for ``-o``/``--resume``."""
+    """The command that continues an interrupted run.
+
+    Args:
+        argv: The interrupted run's arguments after ``fem-anim run``.
+        out: Its output directory.
+
+    Returns:
+        ``fem-anim run`` with the same arguments (scene, ``--set``, ``--solver``, PETSc
+        options) without ``-o``/``--resume``, then ``--resume OUT``; shell-quoted.
+    """
     import shlex
 
     kept, skip = [], False
@@ -98,12 +118,12 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     overrides = (['solver.mode="preview"'] if args.preview else []) + args.overrides
     scene = load_scene(args.scene, overrides)  # validate before importing dolfinx
     out = _output_directory(args, scene)
-    from fem_anim.simulation.loop import Simulation
-
-    from fem_anim.simulation.energy_report import describe_energy, energy_report, initial_energies, write_summary
     from fem_anim.output.provenance import software_versions
-    from fem_anim.simulation.interrupt import stop_at_once
     from fem_anim.output.rundir import read_manifest, write_manifest
+    from fem_anim.simulation.energy_report import (describe_energy, energy_report,
+                                                   initial_energies, write_summary)
+    from fem_anim.simulation.interrupt import stop_at_once
+    from fem_anim.simulation.loop import Simulation
 
     quiet_jit_logging()
     with stop_at_once():  # a signal while meshing or compiling: stop, leave no JIT lock
@@ -168,7 +188,7 @@ def _bench(argv: list[str]) -> int:
     """``fem-anim bench``: the trade study, or with ``--extremes`` / ``--perf`` / ``--hard``
     another bench (``--perf --hard`` is the perf bench's 60k run)."""
     if "--perf" in argv:
-        from fem_anim.bench import perf  # written on another branch (issue 9)
+        from fem_anim.bench import perf
 
         return perf.main([a for a in argv if a != "--perf"])
     if "--hard" in argv:
@@ -185,7 +205,16 @@ def _bench(argv: list[str]) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``fem-anim``; returns the exit code."""
+    """Entry point of ``fem-anim``.
+
+    Args:
+        argv: The arguments after the program name (default: ``sys.argv[1:]``); PETSc
+            options among them go to the step solver.
+
+    Returns:
+        The exit code: 0; 2 for an error a user can cause (one line on stderr); 128 + the
+        signal number for a run a signal stopped; 130 for Ctrl-C.
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     app_args, solver_options, global_args = split_petsc_args(argv)
     try:

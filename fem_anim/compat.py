@@ -53,30 +53,11 @@ from dolfinx import cpp as _cpp
 from dolfinx import fem, geometry, jit
 from dolfinx import mesh as dmesh
 
-__all__ = [
-    "DOLFINX_VERSION",
-    "LEGACY",
-    "SUPPORTED",
-    "vector_space",
-    "cell_space",
-    "mixed_space",
-    "collapse_subspace",
-    "set_schur_user_matrix",
-    "trust_region_boundary_reasons",
-    "quadrature_space",
-    "petsc_vec",
-    "geometry_dofmap",
-    "cell_dofs",
-    "dofs_of_cells",
-    "create_mesh",
-    "colliding_cells",
-    "expression",
-    "evaluate",
-    "basix_cell",
-    "reference_quadrature",
-    "compile_forms_together",
-    "jit_locks_released",
-]
+__all__ = ["DOLFINX_VERSION", "LEGACY", "SUPPORTED", "vector_space", "cell_space", "mixed_space",
+           "collapse_subspace", "set_schur_user_matrix", "trust_region_boundary_reasons",
+           "quadrature_space", "petsc_vec", "geometry_dofmap", "cell_dofs", "dofs_of_cells",
+           "create_mesh", "colliding_cells", "expression", "evaluate", "basix_cell",
+           "reference_quadrature", "compile_forms_together", "jit_locks_released"]
 
 #: (major, minor) of the DOLFINx in use.
 DOLFINX_VERSION: tuple[int, int] = tuple(int(p) for p in dolfinx.__version__.split(".")[:2])
@@ -94,15 +75,25 @@ if not LEGACY:
 
 
 def vector_space(mesh, degree: int) -> fem.FunctionSpace:
-    """Vector-valued continuous Lagrange space of the given degree."""
+    """Vector-valued continuous Lagrange space of the given degree.
+
+    Args:
+        mesh: The DOLFINx mesh (its geometric dimension is the value size).
+        degree: The Lagrange degree.
+    """
     if LEGACY:
         return fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
     return fem.functionspace(mesh, ("Lagrange", degree, (mesh.geometry.dim,)))
 
 
 def mixed_space(mesh, degree_u: int, degree_p: int) -> fem.FunctionSpace:
-    """Mixed space of a vector Lagrange displacement (degree_u) and a scalar Lagrange
-    pressure (degree_p): Taylor-Hood for (2, 1)."""
+    """Mixed space of a vector Lagrange displacement and a scalar Lagrange pressure.
+
+    Args:
+        mesh: The DOLFINx mesh.
+        degree_u: The displacement's Lagrange degree.
+        degree_p: The pressure's Lagrange degree ((2, 1): Taylor-Hood).
+    """
     if LEGACY:
         cell = mesh.ufl_cell()
         element = ufl.MixedElement([ufl.VectorElement("Lagrange", cell, degree_u),
@@ -116,16 +107,30 @@ def mixed_space(mesh, degree_u: int, degree_p: int) -> fem.FunctionSpace:
 
 
 def collapse_subspace(space: fem.FunctionSpace, i: int) -> tuple[fem.FunctionSpace, np.ndarray]:
-    """Sub-space ``i`` of a mixed space as a space of its own, and the map from each of its
-    local dofs (unrolled: block size times nodes, owned and ghost) to the local dof of the
-    mixed space."""
+    """Sub-space ``i`` of a mixed space as a space of its own.
+
+    Args:
+        space: The mixed space.
+        i: The sub-space's index.
+
+    Returns:
+        The collapsed space, and the map from each of its local dofs (unrolled: block size
+        times nodes, owned and ghost) to the local dof of the mixed space (int32).
+    """
     sub, dofs = space.sub(i).collapse()
     return sub, np.asarray(dofs, dtype=np.int32)
 
 
 def set_schur_user_matrix(pc, S) -> None:
-    """``PCFieldSplitSetSchurPre(pc, USER, S)``: petsc4py 3.18 names the enum
-    ``PC.SchurPreType``, later releases ``PC.FieldSplitSchurPreType``."""
+    """``PCFieldSplitSetSchurPre(pc, USER, S)``.
+
+    petsc4py 3.18 names the enum ``PC.SchurPreType``, later releases
+    ``PC.FieldSplitSchurPreType``.
+
+    Args:
+        pc: A PCFIELDSPLIT preconditioner of Schur type.
+        S: The matrix to precondition the Schur complement with.
+    """
     from petsc4py import PETSc
 
     kinds = getattr(PETSc.PC, "FieldSplitSchurPreType", None) or PETSc.PC.SchurPreType
@@ -136,7 +141,11 @@ def trust_region_boundary_reasons() -> tuple[int, int]:
     """The KSP reasons of a trust-region CG (KSPSTCG) that stopped on the region's boundary:
     negative curvature followed to it, and CG's iterate leaving it. petsc4py 3.18 names them
     ``CONVERGED_CG_NEG_CURVE`` and ``CONVERGED_CG_CONSTRAINED`` (its ``CONVERGED_STEP_LENGTH``
-    is 7, another reason), 3.22 ``CONVERGED_NEG_CURVE`` and ``CONVERGED_STEP_LENGTH``."""
+    is 7, another reason), 3.22 ``CONVERGED_NEG_CURVE`` and ``CONVERGED_STEP_LENGTH``.
+
+    Returns:
+        The two reasons (negative curvature, boundary reached), 5 and 6 on both releases.
+    """
     from petsc4py import PETSc
 
     R = PETSc.KSP.ConvergedReason
@@ -146,14 +155,24 @@ def trust_region_boundary_reasons() -> tuple[int, int]:
 
 
 def cell_space(mesh) -> fem.FunctionSpace:
-    """Piecewise-constant scalars: one value per cell (DG0)."""
+    """Piecewise-constant scalars: one value per cell (DG0).
+
+    Args:
+        mesh: The DOLFINx mesh.
+    """
     if LEGACY:
         return fem.FunctionSpace(mesh, ("DG", 0))
     return fem.functionspace(mesh, ("DG", 0))
 
 
 def quadrature_space(mesh, degree: int, shape: tuple[int, ...] = ()) -> fem.FunctionSpace:
-    """Quadrature-point data space of the default scheme at ``degree``."""
+    """Quadrature-point data space of the default scheme.
+
+    Args:
+        mesh: The DOLFINx mesh.
+        degree: The quadrature degree.
+        shape: The value shape at each point (``()``: scalars).
+    """
     if LEGACY:
         cell = mesh.ufl_cell()
         if shape:
@@ -168,12 +187,23 @@ def quadrature_space(mesh, degree: int, shape: tuple[int, ...] = ()) -> fem.Func
 
 
 def petsc_vec(u: fem.Function):
-    """The PETSc vector that holds a Function's degrees of freedom."""
+    """The PETSc vector that holds a Function's degrees of freedom.
+
+    Args:
+        u: The Function.
+    """
     return u.vector if LEGACY else u.x.petsc_vec
 
 
 def geometry_dofmap(mesh) -> np.ndarray:
-    """Cell -> geometry node indices as a (num_cells, nodes_per_cell) array (ghosts included)."""
+    """Cell -> geometry node indices.
+
+    Args:
+        mesh: The DOLFINx mesh.
+
+    Returns:
+        A (num_cells, nodes_per_cell) array, ghost cells included.
+    """
     dofmap = mesh.geometry.dofmap
     if LEGACY:
         return dofmap.array.reshape(dofmap.num_nodes, -1)
@@ -181,7 +211,14 @@ def geometry_dofmap(mesh) -> np.ndarray:
 
 
 def cell_dofs(V: fem.FunctionSpace) -> np.ndarray:
-    """Cell -> dof (block) indices of a space as a (num_cells, dofs_per_cell) array."""
+    """Cell -> dof (block) indices of a space.
+
+    Args:
+        V: The function space.
+
+    Returns:
+        A (num_cells, dofs_per_cell) array, ghost cells included.
+    """
     dofmap = V.dofmap.list
     if LEGACY:
         return dofmap.array.reshape(dofmap.num_nodes, -1)
@@ -193,12 +230,30 @@ def dofs_of_cells(V: fem.FunctionSpace, cells: np.ndarray) -> np.ndarray:
 
     ``fem.locate_dofs_topological(V, tdim, cells)`` does this on 0.5, but on 0.9 it asks
     for the cell-to-cell connectivity first; the cell dofmap answers on both.
+
+    Args:
+        V: The function space.
+        cells: Local cell indices.
+
+    Returns:
+        The local (block) dof indices, int32.
     """
     return np.unique(cell_dofs(V)[np.asarray(cells, dtype=np.int64)]).astype(np.int32)
 
 
 def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: str):
-    """Distribute a P1 simplex mesh given on one rank (other ranks pass empty arrays)."""
+    """Distribute a P1 simplex mesh given on one rank (collective).
+
+    Args:
+        comm: The communicator to distribute over.
+        cells: The simplices (other ranks pass an empty array).
+        x: The vertex coordinates (other ranks pass an empty array).
+        gdim: The geometric dimension.
+        cell_name: ``"triangle"`` or ``"tetrahedron"``.
+
+    Returns:
+        The distributed DOLFINx mesh.
+    """
     if LEGACY:
         domain = ufl.Mesh(ufl.VectorElement(
             "Lagrange", ufl.Cell(cell_name, geometric_dimension=gdim), 1))
@@ -208,7 +263,15 @@ def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: st
 
 
 def colliding_cells(mesh, points: np.ndarray):
-    """Local cells containing each of ``points`` (n, 3): an adjacency list point -> cells."""
+    """Local cells containing each of a set of points.
+
+    Args:
+        mesh: The DOLFINx mesh.
+        points: The points, (n, 3).
+
+    Returns:
+        An adjacency list point -> local cells containing it.
+    """
     if LEGACY:
         tree = geometry.BoundingBoxTree(mesh, mesh.topology.dim)
         candidates = geometry.compute_collisions(tree, points)
@@ -219,20 +282,39 @@ def colliding_cells(mesh, points: np.ndarray):
 
 
 def expression(expr, points: np.ndarray, jit_options: dict | None = None) -> fem.Expression:
-    """A compiled UFL expression at reference ``points`` (evaluate it with :func:`evaluate`)."""
+    """A compiled UFL expression at reference points (evaluate it with :func:`evaluate`).
+
+    Args:
+        expr: The UFL expression.
+        points: Points on the reference cell, (n, tdim).
+        jit_options: FFCx JIT options.
+    """
     if LEGACY:
         return fem.Expression(expr, points, jit_params=jit_options)
     return fem.Expression(expr, points, jit_options=jit_options)
 
 
 def evaluate(expr: fem.Expression, mesh, cells: np.ndarray) -> np.ndarray:
-    """Values of a compiled expression on local ``cells``: (num_cells, points * value_size)."""
+    """Values of a compiled expression on local cells.
+
+    Args:
+        expr: The compiled expression.
+        mesh: The mesh it lives on.
+        cells: Local cell indices.
+
+    Returns:
+        A (num_cells, points * value_size) array.
+    """
     values = expr.eval(cells) if LEGACY else expr.eval(mesh, cells)
     return values.reshape(len(cells), -1)
 
 
 def basix_cell(name: str):
-    """basix's cell type of a cell name (``"interval"``, ``"triangle"``, ``"tetrahedron"``)."""
+    """basix's cell type of a cell name.
+
+    Args:
+        name: ``"interval"``, ``"triangle"`` or ``"tetrahedron"``.
+    """
     import basix
 
     if LEGACY:
@@ -244,6 +326,13 @@ def reference_quadrature(cell_name: str, degree: int) -> tuple[np.ndarray, np.nd
     """Points and weights of basix's default rule of ``degree`` on a reference cell.
 
     This is the rule FFCx uses for ``quadrature_degree`` with the default scheme.
+
+    Args:
+        cell_name: ``"interval"``, ``"triangle"`` or ``"tetrahedron"``.
+        degree: The degree the rule integrates exactly.
+
+    Returns:
+        The points (n, tdim) and weights (n,).
     """
     import basix
 
@@ -257,11 +346,17 @@ def compile_forms_together(forms: dict[str, ufl.Form], jit_options: dict) -> dic
     """Compile several real-valued forms on one mesh into one FFCx module (one gcc run).
 
     ``fem.form`` compiles every form into its own C module; the forms of one problem
-    compiled together take about half the time (9 forms of the default scene: 3.0 s
-    against 5.8 s with a cold cache). Under MPI rank 0 compiles and the others then load
-    the module from the cache (DOLFINx's ``mpi_jit_decorator``). The Forms built are the
-    ones ``fem.form`` builds (same coefficients, constants, subdomain data), so they go to
-    the ``fem.petsc`` assemblers like any other.
+    compiled together take about half the time with a cold cache. Under MPI rank 0 compiles
+    and the others then load the module from the cache (DOLFINx's ``mpi_jit_decorator``).
+    The Forms built are the ones ``fem.form`` builds (same coefficients, constants,
+    subdomain data), so they go to the ``fem.petsc`` assemblers like any other.
+
+    Args:
+        forms: Name -> UFL form, all on one mesh.
+        jit_options: FFCx JIT options (cache directory, compiler flags).
+
+    Returns:
+        Name -> compiled DOLFINx Form.
     """
     ufl_forms = list(forms.values())
     mesh = ufl_forms[0].ufl_domain().ufl_cargo()
@@ -310,8 +405,9 @@ def _legacy_form(form: ufl.Form, ufcx_form, module, code, mesh):
 def _current_form(form: ufl.Form, ufcx_form, module, code, mesh):
     """A 0.9 ``fem.Form`` from one ufcx form of a jointly compiled module.
 
-    ``mesh`` is the UFL domain's cargo, which in 0.9 is the C++ mesh. The same steps as the nested ``_form`` of ``dolfinx.fem.form`` (0.9.0): subdomain ids
-    per integral type, their integration entities, then the C++ form.
+    ``mesh`` is the UFL domain's cargo, which in 0.9 is the C++ mesh. The same steps as the
+    nested ``_form`` of ``dolfinx.fem.form`` (0.9.0): subdomain ids per integral type, their
+    integration entities, then the C++ form.
     """
     domain, = form.subdomain_data().keys()
     data = form.subdomain_data()[domain]
@@ -344,10 +440,13 @@ def jit_locks_released(jit_options: dict | None = None):
     ``<module>.c.cached`` when the module is ready; on an Exception raised inside its compile
     it renames the lock to ``.c.failed``, but a KeyboardInterrupt, or any exception raised
     between its creating the lock (``get_cached_module``) and entering its ``try`` (a signal's
-    :class:`~fem_anim.errors.Interrupted` landing there: seen once under load), leaves it, and
-    every later compile of that module waits ``timeout`` seconds and fails ("JIT compilation
-    timed out"). When the block ends with any exception, the locks made since it began that
-    have no ``.c.cached`` are renamed as FFCx does (one FFCx already renamed is gone).
+    :class:`~fem_anim.errors.Interrupted` landing there), leaves it, and every later compile
+    of that module waits ``timeout`` seconds and fails ("JIT compilation timed out"). When
+    the block ends with any exception, the locks made since it began that have no
+    ``.c.cached`` are renamed as FFCx does (one FFCx already renamed is gone).
+
+    Args:
+        jit_options: FFCx JIT options (their ``cache_dir`` is searched).
     """
     options = jit.get_parameters(jit_options) if LEGACY else jit.get_options(jit_options)
     cache = Path(str(options["cache_dir"])).expanduser()

@@ -1,7 +1,8 @@
-"""Typed errors of fem_anim (STYLE rule 8).
+"""Typed errors of fem_anim, and the helpers that word their messages.
 
 Library code raises these; only the command line turns them into a message and
-exit code 2. Every message names the offending key, file or value.
+exit code 2. Every message names the offending key, file or value. Under MPI an error is
+decided on one rank and raised on all of them by the caller.
 """
 
 import os
@@ -27,7 +28,12 @@ class ConvergenceError(FemAnimError):
 
 
 class Interrupted(FemAnimError):
-    """A signal (SIGINT, SIGTERM, SIGHUP) stopped the run; ``signum`` says which."""
+    """A signal (SIGINT, SIGTERM, SIGHUP) stopped the run.
+
+    Args:
+        message: The one-line message (which step, how to resume).
+        signum: The signal's number.
+    """
 
     def __init__(self, message: str, signum: int):
         super().__init__(message)
@@ -39,6 +45,13 @@ def describe_os_error(err: OSError, path: object = None) -> str:
 
     h5py and some writers raise ``OSError`` without a file name or ``strerror``; the
     caller's ``path`` (the file being written) names it then.
+
+    Args:
+        err: The error.
+        path: The file being read or written, named if ``err`` names none.
+
+    Returns:
+        ``FILE: reason``, or the reason alone if no file is known.
     """
     name = err.filename if err.filename is not None else path
     reason = err.strerror or (os.strerror(err.errno) if err.errno else str(err) or "OS error")
@@ -46,6 +59,14 @@ def describe_os_error(err: OSError, path: object = None) -> str:
 
 
 def show_value(value: object, limit: int = 200) -> str:
-    """``repr`` of a value for a message, cut short (a scene value may be megabytes)."""
+    """``repr`` of a value for a message, cut short (a scene value may be megabytes).
+
+    Args:
+        value: Any value.
+        limit: The most characters of its ``repr`` to keep.
+
+    Returns:
+        The ``repr``, or its first ``limit`` characters and the full length.
+    """
     text = repr(value)
     return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"

@@ -31,6 +31,21 @@ def dissipation_potential(u, u_anchor, coefficient, alpha, beta, rho, mu, lmbda,
     """c/2 (u - u_anchor)^T (alpha M + beta K_0) (u - u_anchor) as a UFL form.
 
     Terms with a zero coefficient (``alpha`` or ``beta`` given as the float 0) are omitted.
+
+    Args:
+        u: The displacement.
+        u_anchor: The scheme's anchor u_d (x_d = X + u_d).
+        coefficient: c = w/tau of the scheme.
+        alpha: The mass-proportional coefficient (1/s).
+        beta: The stiffness-proportional coefficient (s).
+        rho: The density (kg/m^3).
+        mu: The shear modulus (Pa) of K_0.
+        lmbda: The first Lame parameter (Pa) of K_0.
+        dx_mass: The mass measure.
+        dx_elastic: The elastic energy's measure.
+
+    Returns:
+        The UFL form D, or None if both coefficients are 0.
     """
     d = u - u_anchor
     form = None

@@ -13,5 +13,12 @@ __all__ = ["gravity_potential"]
 
 
 def gravity_potential(u, rho, g, dx: ufl.Measure):
-    """- int rho g . u dV, with ``g`` the acceleration of gravity (m/s^2)."""
+    """The gravitational potential - int rho g . u dV relative to the rest configuration.
+
+    Args:
+        u: The displacement.
+        rho: The density (kg/m^3).
+        g: The acceleration of gravity (m/s^2).
+        dx: The cell measure.
+    """
     return -rho * ufl.inner(g, u) * dx

@@ -39,8 +39,8 @@ formulations converge to the same solution), and Mooney-Rivlin exists only here:
 
     \frac{1}{\kappa} = \frac{2 (1 + \nu)(1 - 2\nu)}{E\, (2\nu + c (1 - 2\nu))},
 
-zero at ``nu = 1/2``. Pure UFL (STYLE rule 2); the discretisation (Taylor-Hood P2/P1) is
-bound in :mod:`fem_anim.problem.objective`.
+zero at ``nu = 1/2``. Pure UFL; the discretisation (Taylor-Hood P2/P1) is bound in
+:mod:`fem_anim.problem.objective`.
 """
 
 from __future__ import annotations
@@ -99,7 +99,20 @@ MIXED_MATERIALS: dict[str, MixedMaterial] = {
 
 
 def compliance(material: MixedMaterial, E: float, nu: float, d: int) -> float:
-    """``1/kappa`` (1/Pa) for Young's modulus ``E`` and Poisson's ratio ``nu`` in (0, 1/2]."""
+    """The compliance ``1/kappa`` of a mixed material (formula in the module docstring).
+
+    Args:
+        material: The mixed material (its ``bulk_shift`` c in ``kappa = lmbda + c mu``).
+        E: Young's modulus (Pa).
+        nu: Poisson's ratio in (0, 1/2].
+        d: The dimension (2 or 3).
+
+    Returns:
+        ``1/kappa`` (1/Pa); 0 at ``nu = 1/2``.
+
+    Raises:
+        ValueError: if ``E <= 0`` or ``nu`` is outside (0, 1/2].
+    """
     c = material.bulk_shift(d)
     if not (0.0 < nu <= 0.5 and E > 0.0):
         raise ValueError(f"the mixed formulation needs E > 0 and nu in (0, 0.5], got {E}, {nu}")
@@ -112,6 +125,17 @@ def lagrangian(material: MixedMaterial, F: Expr, p: Expr, mu, inv_kappa, ratio=0
     At the discrete saddle point ``p_h`` maximises ``int W(F(u_h), p) dX`` over the pressure
     space, so ``int W(F(u_h), p_h) dX`` is the stored energy of the discrete constrained
     system (what :mod:`fem_anim.problem.objective` reports as the elastic energy).
+
+    Args:
+        material: The mixed material (``psi_dev`` and the constraint ``g``).
+        F: The deformation gradient.
+        p: The pressure field (Pa).
+        mu: The shear modulus (Pa).
+        inv_kappa: The compliance ``1/kappa`` (1/Pa).
+        ratio: The Mooney ratio r (Mooney-Rivlin only).
+
+    Returns:
+        The UFL energy density ``W(F, p)``.
     """
     J = ufl.det(F)
     return material.psi_dev(F, mu, ratio) + p * material.constraint(J) - inv_kappa / 2 * p**2

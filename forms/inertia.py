@@ -16,18 +16,37 @@ __all__ = ["mass_measure", "inertia", "kinetic_energy"]
 
 
 def mass_measure(dx: ufl.Measure, degree: int, lumped: bool) -> ufl.Measure:
-    """Measure that makes ``rho u.v dx`` the consistent or the (P1) lumped mass matrix."""
+    """Measure that makes ``rho u.v dx`` the consistent or the (P1) lumped mass matrix.
+
+    Args:
+        dx: The cell measure.
+        degree: The displacement's Lagrange degree k (consistent: quadrature degree 2k).
+        lumped: Use the vertex rule (row-sum lumping, seed footnote 4).
+    """
     if lumped:
         return dx(metadata={"quadrature_rule": "vertex", "quadrature_degree": 1})
     return dx(metadata={"quadrature_degree": 2 * degree})
 
 
 def inertia(u, u_pred, rho, dx_mass: ufl.Measure):
-    """1/2 ||x - y||_M^2 = 1/2 int rho |u - u_pred|^2 (seed eq. 4; x - y = u - u_pred)."""
+    """The inertia term 1/2 ||x - y||_M^2 = 1/2 int rho |u - u_pred|^2 of seed eq. 4.
+
+    Args:
+        u: The displacement (x = X + u).
+        u_pred: The predictor's displacement (y = X + u_pred).
+        rho: The density (kg/m^3).
+        dx_mass: The mass measure (:func:`mass_measure`).
+    """
     w = u - u_pred
     return 0.5 * rho * ufl.inner(w, w) * dx_mass
 
 
 def kinetic_energy(v, rho, dx_mass: ufl.Measure):
-    """k = 1/2 v^T M v (seed eq. 19)."""
+    """The kinetic energy k = 1/2 v^T M v (seed eq. 19).
+
+    Args:
+        v: The velocity.
+        rho: The density (kg/m^3).
+        dx_mass: The mass measure (:func:`mass_measure`).
+    """
     return 0.5 * rho * ufl.inner(v, v) * dx_mass

@@ -22,7 +22,17 @@ __all__ = [
 
 
 def dimension(F: Expr) -> int:
-    """Return ``d`` for a ``d x d`` deformation gradient ``F``."""
+    """The dimension of a deformation gradient.
+
+    Args:
+        F: A ``d x d`` UFL tensor.
+
+    Returns:
+        ``d``.
+
+    Raises:
+        ValueError: if ``F`` is not 2x2 or 3x3.
+    """
     d, e = F.ufl_shape
     if d != e or d not in (2, 3):
         raise ValueError(f"F must be 2x2 or 3x3, got shape {F.ufl_shape}")
@@ -30,22 +40,38 @@ def dimension(F: Expr) -> int:
 
 
 def deformation_gradient(u: Expr) -> Expr:
-    """Deformation gradient ``F = I + grad(u)`` of a displacement ``u`` (seed §4.2)."""
+    """Deformation gradient ``F = I + grad(u)`` (seed §4.2, eq. 26).
+
+    Args:
+        u: The displacement.
+    """
     return ufl.Identity(len(u)) + ufl.grad(u)
 
 
 def right_cauchy_green(F: Expr) -> Expr:
-    """Right Cauchy-Green tensor ``C = F^T F``."""
+    """Right Cauchy-Green tensor ``C = F^T F``.
+
+    Args:
+        F: The deformation gradient.
+    """
     return F.T * F
 
 
 def green_strain(F: Expr) -> Expr:
-    """Green-Lagrange strain ``E = (F^T F - I) / 2``, the StVK strain of seed eq. (37)."""
+    """Green-Lagrange strain ``E = (F^T F - I) / 2``, the StVK strain of seed eq. (37).
+
+    Args:
+        F: The deformation gradient.
+    """
     return (F.T * F - ufl.Identity(dimension(F))) / 2
 
 
 def small_strain(F: Expr) -> Expr:
-    """Infinitesimal strain ``eps = sym(F) - I = sym(grad u)`` (seed §4.4.1)."""
+    """Infinitesimal strain ``eps = sym(F) - I = sym(grad u)`` (seed §4.4.1).
+
+    Args:
+        F: The deformation gradient.
+    """
     return ufl.sym(F) - ufl.Identity(dimension(F))
 
 
@@ -54,6 +80,12 @@ def invariants(F: Expr) -> tuple[Expr, Expr, Expr]:
 
     ``I_C = tr C = sum sigma_i^2``, ``II_C = (tr(C)^2 - tr(C C)) / 2 = sum_{i<j} sigma_i^2
     sigma_j^2`` and ``J = det F`` (signed product of the singular values ``sigma_i`` of ``F``).
+
+    Args:
+        F: The deformation gradient.
+
+    Returns:
+        ``(I_C, II_C, J)``.
     """
     C = right_cauchy_green(F)
     I_C = ufl.tr(C)

@@ -35,7 +35,11 @@ class ExtraData:
     evaluate: Callable[[np.ndarray], np.ndarray]
 
     def value_shape(self, d: int) -> tuple[int, ...]:
-        """Shape of the terminal in ``d`` dimensions."""
+        """Shape of the terminal.
+
+        Args:
+            d: The dimension (2 or 3).
+        """
         return (d,) * self.rank
 
 
@@ -67,7 +71,11 @@ class Material:
     exact_hessian: bool = True
 
     def needs(self, d: int) -> tuple[str, ...]:
-        """Keys of :data:`EXTRA_DATA` that ``psi`` takes for a ``d x d`` ``F``."""
+        """Keys of :data:`EXTRA_DATA` that ``psi`` takes.
+
+        Args:
+            d: The dimension of ``F`` (2 or 3).
+        """
         return {2: self.needs_2d, 3: self.needs_3d}[d]
 
 
@@ -92,6 +100,12 @@ MATERIALS: dict[str, Material] = {
 
 def get_material(name: str) -> Material:
     """Look up a material by its scene-file name.
+
+    Args:
+        name: ``material.model`` of a scene.
+
+    Returns:
+        The material.
 
     Raises:
         ValueError: If ``name`` is not a key of :data:`MATERIALS`.

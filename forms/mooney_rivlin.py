@@ -9,7 +9,7 @@ with ``I_1 = tr C`` and ``I_2 = (tr(C)^2 - tr(C^2))/2`` of the *three-dimensiona
 Cauchy-Green tensor: in plane strain (``d = 2``) ``C_3 = diag(C, 1)``, so ``I_1 = I_C + 1`` and
 ``I_2 = II_C + I_C``, and the 2D density is the 3D one restricted to in-plane deformations (as
 in :mod:`.lame`). The modified invariants do not change under a pure dilatation, so
-``psi_dev`` is isochoric; the volumetric part is the constraint ``J - 1`` of :mod:`.mixed`
+``psi_dev`` is isochoric; the volumetric part is the constraint ``J - 1`` of :mod:`.incompressible`
 with the bulk modulus ``kappa = lmbda + 2/3 mu``. The shear modulus at rest is
 ``mu = 2 (c10 + c01)``; ``c01 = r mu / 2``, ``c10 = (1 - r) mu / 2`` with the Mooney ratio
 ``r`` in [0, 1] (``r = 0``: the isochoric neo-Hookean model). Defined for ``J > 0`` only

@@ -29,7 +29,7 @@ potential
 has gradient mu p_n f1(|u_T|) u_T/|u_T| with f1 = f0' rising from 0 to 1 at |u_T| = eps:
 Coulomb friction of magnitude mu p_n once the point slides faster than eps_v, a stiff
 viscous stick below. Added with the weight w of E, its stationarity term is the friction
-force. Everything here is pure UFL of its arguments (STYLE rule 2).
+force. Everything here is pure UFL of its arguments.
 """
 
 from __future__ import annotations
@@ -41,35 +41,69 @@ __all__ = ["plane_distance", "sphere_distance", "sphere_normal", "barrier",
 
 
 def plane_distance(x, point, normal):
-    """d = n . (x - p) for the half space n . (x - p) >= 0 (``normal`` of unit length)."""
+    """Signed distance d = n . (x - p) to the plane bounding the half space n . (x - p) >= 0.
+
+    Args:
+        x: The deformed position X + u.
+        point: A point p of the plane.
+        normal: Its unit normal n, pointing into the free half space.
+    """
     return ufl.dot(normal, x - point)
 
 
 def sphere_distance(x, center, radius):
-    """d = |x - c| - r outside the ball of radius r about c."""
+    """Signed distance d = |x - c| - r to a sphere (positive outside).
+
+    Args:
+        x: The deformed position X + u.
+        center: The centre c.
+        radius: The radius r (m).
+    """
     r = x - center
     return ufl.sqrt(ufl.dot(r, r)) - radius
 
 
 def sphere_normal(x, center):
-    """The outward unit normal of the sphere at the point nearest to x: (x - c)/|x - c|."""
+    """The outward unit normal (x - c)/|x - c| of a sphere at the point nearest to x.
+
+    Args:
+        x: The deformed position X + u.
+        center: The centre c.
+    """
     r = x - center
     return r / ufl.sqrt(ufl.dot(r, r))
 
 
 def barrier(d, dhat):
-    """b(d) = -(d - d_hat)^2 ln(d / d_hat) on (0, d_hat), 0 beyond (m^2)."""
+    """The barrier b(d) = -(d - d_hat)^2 ln(d / d_hat) on (0, d_hat), 0 beyond (m^2).
+
+    Args:
+        d: The signed distance (m).
+        dhat: The activation distance d_hat (m).
+    """
     return ufl.conditional(ufl.lt(d, dhat), -(d - dhat) ** 2 * ufl.ln(d / dhat), 0.0)
 
 
 def barrier_derivative(d, dhat):
-    """b'(d) = -2 (d - d_hat) ln(d / d_hat) - (d - d_hat)^2 / d on (0, d_hat), 0 beyond."""
+    """The barrier's slope b'(d) = -2 (d - d_hat) ln(d / d_hat) - (d - d_hat)^2 / d, 0 beyond.
+
+    Args:
+        d: The signed distance (m).
+        dhat: The activation distance d_hat (m).
+    """
     return ufl.conditional(ufl.lt(d, dhat),
                            -2.0 * (d - dhat) * ufl.ln(d / dhat) - (d - dhat) ** 2 / d, 0.0)
 
 
 def contact_energy(d, dhat, kappa, ds: ufl.Measure):
-    """E_c = kappa / d_hat int b(d) dA (J; ``kappa`` in Pa)."""
+    """The contact energy E_c = kappa / d_hat int b(d) dA (J).
+
+    Args:
+        d: The signed distance of the boundary points (m).
+        dhat: The activation distance d_hat (m).
+        kappa: The barrier stiffness (Pa).
+        ds: The contact measure over the boundary.
+    """
     return kappa / dhat * barrier(d, dhat) * ds
 
 
@@ -78,6 +112,10 @@ def smoothed_slip(y2, eps):
 
     The cubic term y^3 = y^2 sqrt(y^2) is taken as 0 at y = 0 (its value and first two
     derivatives vanish there), where UFL's derivative of sqrt would be 0/0.
+
+    Args:
+        y2: The squared tangential slip |u_T|^2 (m^2).
+        eps: The smoothing length eps_v h (m).
     """
     y = ufl.sqrt(y2)
     cubic = ufl.conditional(ufl.gt(y2, 0.0), y2 * y, 0.0)
@@ -86,7 +124,17 @@ def smoothed_slip(y2, eps):
 
 
 def friction_potential(u, u_n, normal_n, pressure_n, mu, eps, ds: ufl.Measure):
-    """D = mu int p_n f0(|(I - n_n n_n^T)(u - u_n)|) dA (J), lagged p_n and n_n."""
+    """The lagged friction potential D = mu int p_n f0(|(I - n_n n_n^T)(u - u_n)|) dA (J).
+
+    Args:
+        u: The displacement.
+        u_n: The displacement at the step start.
+        normal_n: The obstacle normal n_n at the step start.
+        pressure_n: The contact pressure p_n at the step start (Pa).
+        mu: The friction coefficient.
+        eps: The smoothing length eps_v h (m).
+        ds: The contact measure over the boundary.
+    """
     du = u - u_n
     u_T = du - ufl.dot(normal_n, du) * normal_n
     return mu * pressure_n * smoothed_slip(ufl.dot(u_T, u_T), eps) * ds

@@ -26,11 +26,10 @@ Symplectic Euler is explicit: its objective is the quadratic 1/2 ||x - y||^2_M -
 f(x_n).x (one linear solve with M), and it is stable only for h < 2/omega_max, omega_max the
 highest natural frequency of the discrete system, i.e. the largest generalised eigenvalue of
 K phi = omega^2 M phi. It grows like c_p/h_min (c_p = sqrt((lmbda + 2 mu)/rho), h_min the
-smallest element size) with a large mesh-dependent factor: measured 1254 rad/s (consistent
-mass) and 641 rad/s (lumped) on a 0.1 m tetrahedral bar with c_p = 11.6 m/s, i.e. about 11
-and 5.5 times c_p/h (tests/test_integrators.py computes it and checks the bound). It is a
-comparison baseline, not a production integrator. Rayleigh damping, when declared, is taken
-implicitly in every scheme (:mod:`forms.damping`).
+smallest element size) with a large mesh-dependent factor (``tests/test_integrators.py``
+computes omega_max and checks the bound). It is a comparison baseline, not a production
+integrator. Rayleigh damping, when declared, is taken implicitly in every scheme
+(:mod:`.damping`).
 """
 
 from __future__ import annotations
@@ -69,5 +68,11 @@ SCHEMES = {
 
 
 def step_objective(inertia, potential, weight):
-    """g(x) = 1/2 ||x - y||_M^2 + w E(x) (seed eq. 4) as one UFL form."""
+    """The step objective g(x) = 1/2 ||x - y||_M^2 + w E(x) (seed eq. 4) as one UFL form.
+
+    Args:
+        inertia: The form 1/2 ||x - y||_M^2 (:func:`fem_anim.forms.inertia.inertia`).
+        potential: The form E (elastic, gravity and other potentials).
+        weight: The scheme's energy weight w (h^2/4 for Newmark).
+    """
     return inertia + weight * potential

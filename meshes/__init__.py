@@ -1,4 +1,4 @@
-"""Gmsh geometry builders (installed as ``fem_anim.meshes``; STYLE rule 3).
+"""Gmsh geometry builders (installed as ``fem_anim.meshes``).
 
 Each builder takes a ``gmsh.model``, adds its geometry and physical groups, meshes it
 and returns the model. Builders never initialise or finalise gmsh: the caller owns the

@@ -13,7 +13,15 @@ __all__ = ["boundary_of", "entities_in_box", "name_body", "name_ends", "name_gro
 
 
 def padded_origin(origin: Sequence[float] | None, dim: int) -> list[float]:
-    """The origin as three coordinates (``z = 0`` in 2D; default the coordinate origin)."""
+    """The origin as three coordinates (``z = 0`` in 2D; default the coordinate origin).
+
+    Args:
+        origin: ``dim`` coordinates, or None.
+        dim: The dimension (2 or 3).
+
+    Raises:
+        ValueError: if ``origin`` has not ``dim`` entries.
+    """
     origin = [0.0] * dim if origin is None else [float(c) for c in origin]
     if len(origin) != dim:
         raise ValueError(f"origin must have {dim} entries, got {origin}")
@@ -21,7 +29,18 @@ def padded_origin(origin: Sequence[float] | None, dim: int) -> list[float]:
 
 
 def name_group(model, dim: int, entities: Sequence[int], tag: int, name: str) -> int:
-    """Add the physical group ``tag`` of the ``dim``-entities ``entities`` and call it ``name``."""
+    """Add a named physical group.
+
+    Args:
+        model: The gmsh model.
+        dim: The entities' dimension.
+        entities: Their tags.
+        tag: The group's tag.
+        name: The group's name.
+
+    Returns:
+        The group's tag.
+    """
     group = model.addPhysicalGroup(dim, list(entities), tag)
     model.setPhysicalName(dim, group, name)
     return group
@@ -29,6 +48,11 @@ def name_group(model, dim: int, entities: Sequence[int], tag: int, name: str) ->
 
 def name_body(model, dim: int, body: Sequence[int]) -> list[int]:
     """Name ``body`` (the ``dim``-entities ``body``) and ``surface`` (their boundary), tag 1.
+
+    Args:
+        model: The gmsh model.
+        dim: The body's dimension.
+        body: The tags of its ``dim``-entities.
 
     Returns:
         The tags of the boundary's ``(dim - 1)``-entities, for naming parts of it.
@@ -45,8 +69,16 @@ def name_ends(model, dim: int, boundary: Sequence[int], x_ranges, centre: Sequen
 
     An end is the boundary entities in the box of x in its range of ``x_ranges`` (one
     ``(lo, hi)`` per end) within ``radius`` of the axis through ``centre`` (y and, in 3D, z);
-    ``side`` is the rest of ``boundary``. ``scale`` is the size of the body
-    (:func:`entities_in_box`).
+    ``side`` is the rest of ``boundary``.
+
+    Args:
+        model: The gmsh model.
+        dim: The body's dimension.
+        boundary: The tags of its boundary entities.
+        x_ranges: ``((lo, hi), (lo, hi))``: the x range of each end.
+        centre: A point of the axis (3 coordinates).
+        radius: The body's radius about the axis.
+        scale: The size of the body (:func:`entities_in_box`).
     """
     r = radius if dim == 3 else 0.0
     ends = []
@@ -63,6 +95,10 @@ def set_element_size(model, element_size: float) -> None:
 
     Sizes on points alone leave the inside of curved OCC surfaces (a torus has a single
     point) to gmsh's interpolation; the background field holds them to ``element_size``.
+
+    Args:
+        model: The gmsh model.
+        element_size: The target edge length (m).
     """
     model.mesh.setSize(model.getEntities(0), element_size)
     field = model.mesh.field.add("MathEval")
@@ -71,7 +107,16 @@ def set_element_size(model, element_size: float) -> None:
 
 
 def boundary_of(model, dim: int, entities: Sequence[int]) -> list[int]:
-    """Tags of the ``(dim - 1)``-entities bounding the ``dim``-entities ``entities``."""
+    """Tags of the ``(dim - 1)``-entities bounding some ``dim``-entities.
+
+    Args:
+        model: The gmsh model.
+        dim: The entities' dimension.
+        entities: Their tags.
+
+    Returns:
+        The boundary's tags, sorted.
+    """
     pairs = model.getBoundary([(dim, t) for t in entities], combined=True, oriented=False)
     return sorted({t for _, t in pairs})
 
@@ -81,7 +126,17 @@ def entities_in_box(model, dim: int, lo: Sequence[float], hi: Sequence[float],
     """Tags of the ``dim``-entities whose bounding box lies in ``[lo, hi]``, give or take.
 
     OCC pads bounding boxes by its tolerance (1e-7), so the box is widened by
-    ``max(1e-6 scale, 1e-6)``; ``scale`` is the size of the body.
+    ``max(1e-6 scale, 1e-6)``.
+
+    Args:
+        model: The gmsh model.
+        dim: The entities' dimension.
+        lo: The box's lower corner (3 coordinates).
+        hi: The box's upper corner (3 coordinates).
+        scale: The size of the body.
+
+    Returns:
+        The tags of the entities inside.
     """
     eps = max(1e-6 * scale, 1e-6)
     box = [c - eps for c in lo] + [c + eps for c in hi]

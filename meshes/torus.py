@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from fem_anim.meshes.common import entities_in_box, name_body, name_group, padded_origin, set_element_size
+from fem_anim.meshes.common import (entities_in_box, name_body, name_group, padded_origin,
+                                    set_element_size)
 
 __all__ = ["build_torus"]
 

@@ -1,4 +1,9 @@
-"""Shared pytest set-up (STYLE rule 13): collect garbage and synchronise ranks after each test."""
+"""Shared pytest set-up and helpers.
+
+After each test, garbage is collected and the MPI ranks synchronise (so a collective
+destructor never runs on one rank only); the helpers start the command line and ``mpirun``
+in subprocesses and check Newton's residual test on a run's statistics rows.
+"""
 
 import gc
 import logging
@@ -24,17 +29,32 @@ def _mpi_hygiene():
 
 
 def fem_anim_command() -> list[str]:
-    """How to start the command line in a subprocess (the venv's Python)."""
+    """How to start the command line in a subprocess.
+
+    Returns:
+        The argument list ``[python, "-m", "fem_anim"]`` with this venv's Python.
+    """
     return [sys.executable, "-m", "fem_anim"]
 
 
 def clean_environment() -> dict[str, str]:
-    """The environment without the MPI singleton's variables, for launching mpirun."""
+    """The environment without the MPI singleton's variables, for launching mpirun.
+
+    Returns:
+        A copy of ``os.environ`` without ``OMPI_*``, ``PMIX_*`` and ``PMI_*``.
+    """
     return {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}
 
 
 def mpirun_command(n: int) -> list[str] | None:
-    """``mpirun`` prefix for ``n`` ranks, or None if mpirun is unavailable."""
+    """The ``mpirun`` prefix of a command.
+
+    Args:
+        n: The number of ranks.
+
+    Returns:
+        The prefix (oversubscribed; ``--allow-run-as-root`` as root), or None without mpirun.
+    """
     mpirun = shutil.which("mpirun")
     if mpirun is None:
         return None
@@ -45,7 +65,14 @@ def mpirun_command(n: int) -> list[str] | None:
 
 
 def process_tree(pid: int) -> list[int]:
-    """``pid`` and all its descendants (read from /proc), parents first."""
+    """A process and all its descendants, read from /proc.
+
+    Args:
+        pid: The root process.
+
+    Returns:
+        Its pid and its descendants' pids, parents first.
+    """
     children: dict[int, list[int]] = {}
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
@@ -67,6 +94,10 @@ def kill_tree(pid: int, sig: int) -> None:
     ``os.killpg`` is not enough: OpenMPI 5's launcher puts each rank in a process group of
     its own, so killing the launcher's group leaves the ranks running (and holding the
     trajectory's HDF5 file lock).
+
+    Args:
+        pid: The root process.
+        sig: The signal number.
     """
     for p in process_tree(pid):
         try:
@@ -75,13 +106,21 @@ def kill_tree(pid: int, sig: int) -> None:
             pass
 
 
-#: Newton's documented default residual test (README, "Scene files": solver.stopping).
+#: Newton's documented default residual test (``solver.stopping = "norm"``): rtol, atol.
 README_RTOL, README_ATOL = 1e-8, 1e-12
 
 
 def assert_rows_meet_the_test(rows, rtol: float = README_RTOL, atol: float = README_ATOL):
-    """Every stats row met its residual test: reason 2 or 3 (not the polish's 6) and
-    ``residual_norm <= max(atol, rtol initial_residual_norm)``."""
+    """Assert every stats row met its residual test.
+
+    A row passes with a converged SNES reason (2 or 3, not the polish's 6) and
+    ``residual_norm <= max(atol, rtol initial_residual_norm)``.
+
+    Args:
+        rows: The run's ``stats.csv`` rows.
+        rtol: The relative tolerance.
+        atol: The absolute tolerance.
+    """
     from fem_anim.solver.minimiser import CONVERGED_REASONS
 
     for row in rows:

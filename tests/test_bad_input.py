@@ -374,7 +374,7 @@ CORPUS = [
     Bad("mooney-rivlin-displacement", (('material.model = "mooney_rivlin" exists only with '
                                         'element.formulation = "mixed"'),),
         '[material]\nmodel = "mooney_rivlin"\n'),
-    # -- bodies and contact (issue 16) ---------------------------------------------------------
+    # -- bodies and contact ---------------------------------------------------------------------
     Bad("bodies-overlap", ("body[1] (b) and body[0] (a) overlap at rest",),
         BODY.format(name="a", offset=0.0) + BODY.format(name="b", offset=0.05)),
     Bad("body-inside-body", ("body[1] (b) and body[0] (a) overlap at rest",),
@@ -403,7 +403,7 @@ CORPUS = [
     # -- --set on a scene file --------------------------------------------------------------
     Bad("set-key-into-list", ("--set pin.first.min: pin is a list; give an entry number",),
         PIN, args=("--set", "pin.first.min=[0, 0, 0]"), fresh=True),
-    # -- issue 15: folders of the user's, command-line PETSc options, mesh files ----------------
+    # -- folders of the user's, command-line PETSc options, mesh files -------------------------
     Bad("output-users-folder", ("output directory", "mine is not empty and is not a fem-anim run "
                                 "directory"), "[time]\nsteps = 1\n", setup=_user_folder,
         output=False, fresh=True),

@@ -87,7 +87,7 @@ def test_baij_hessian_gives_the_same_step(tiny_scene):
         sim.minimiser.destroy()
     scale = np.abs(finals[0]).max()
     assert scale > 1e-4
-    # the same iterates: measured bit for bit equal (README: "same iterates to 1e-16")
+    # the same iterates: measured bit for bit equal
     assert np.abs(finals[0] - finals[1]).max() <= 1e-15 * scale
 
 

@@ -1,4 +1,4 @@
-"""Several bodies in contact through the IPC Toolkit (issue 16): physics, not only running.
+"""Several bodies in contact through the IPC Toolkit: physics, not only running.
 
 Every run here is checked frame by frame for intersections by an independent test: the
 boundary triangles are taken from the input tetrahedra in numpy (faces of one cell only),

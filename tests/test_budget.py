@@ -1,4 +1,4 @@
-"""The solver's budget (issue 18, point 1): ``solver.max_iterations`` and ``solver.on_budget``.
+"""The solver's budget: ``solver.max_iterations`` and ``solver.on_budget``.
 
 The bar (:func:`scenes.bar`, 1 x 0.1 x 0.1 m, pinned at x = 0) falls under gravity from
 rest: a soft material (E = 2e5 Pa) bends far enough in a step of 1/30 s that Newton needs

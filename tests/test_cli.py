@@ -1,6 +1,6 @@
 """The path a user walks: ``fem-anim run`` on the default scene, options, overrides, errors.
 
-Issue 2's acceptance tests. Runs that need a fresh process (exit codes, stderr, MPI)
+Runs that need a fresh process (exit codes, stderr, MPI)
 start ``python -m fem_anim``; the rest call :func:`fem_anim.cli.main` in-process.
 """
 
@@ -244,7 +244,7 @@ def test_2d_beam_survives_an_inverting_predictor(tmp_path):
 
 def test_summary_records_provenance(default_run):
     """summary.json names the stack, the merged PETSc options and the wall time split, so
-    two runs (say on Debian 12 and 13) are compared by reading two files (issue 14)."""
+    two runs (say on Debian 12 and 13) are compared by reading two files."""
     import json
 
     import dolfinx

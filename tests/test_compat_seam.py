@@ -1,5 +1,5 @@
 """The version seam holds: no DOLFINx/UFL/basix/FFCx name that differs between 0.5 and 0.9
-appears outside ``fem_anim/compat.py`` (STYLE rule 16, issue 14).
+appears outside ``fem_anim/compat.py``.
 
 Every Python file of the package, the forms, the mesh builders, the tests and the demos is
 read as code (comments and strings dropped by the tokenizer, so prose may name the old API)

@@ -1,4 +1,4 @@
-"""Contact with obstacles (issue 7): the barrier against the numpy oracle, its derivatives,
+"""Contact with obstacles: the barrier against the numpy oracle, its derivatives,
 the step bound, and the physics of bodies dropped on a plane and on a sphere.
 
 * assembly: the DOLFINx contact energy, gradient and Hessian equal
@@ -14,7 +14,7 @@ the step bound, and the physics of bodies dropped on a plane and on a sphere.
   mu = 0.1 (acceleration g (sin - mu cos));
 * a scene without obstacles has no contact term; a body that starts through an
   obstacle is one clear error (exit 2);
-* MPI (issue 8): the jelly-cube scene on 2 and 3 ranks gives the serial stats and final
+* MPI: the jelly-cube scene on 2 and 3 ranks gives the serial stats and final
   displacement to 1e-8.
 """
 
@@ -309,7 +309,7 @@ def test_body_starting_through_an_obstacle_is_one_error(tmp_path, obstacle, mess
     assert not (tmp_path / "out").exists()
 
 
-# -- MPI (issue 8) ------------------------------------------------------------------------------
+# -- MPI ----------------------------------------------------------------------------------------
 @pytest.mark.mpi
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches mpirun itself")
 @pytest.mark.parametrize("ranks", [2, pytest.param(3, marks=pytest.mark.slow)])

@@ -1,4 +1,4 @@
-"""The same physics on every supported stack (issue 14): the default scene on a committed mesh.
+"""The same physics on every supported stack: the default scene on a committed mesh.
 
 gmsh 4.8 (Debian 12) and 4.13 (Debian 13) mesh the default beam differently (1788 against
 1805 tetrahedra), so the default scene is run on the beam meshed once and committed,

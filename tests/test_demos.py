@@ -1,4 +1,4 @@
-"""Every demo runs, reduced and off screen, and asserts its own physics (STYLE rule 11)."""
+"""Every demo runs, reduced and off screen, and asserts its own physics."""
 
 from __future__ import annotations
 

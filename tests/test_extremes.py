@@ -1,4 +1,4 @@
-"""Stability at the extremes (issue 6): expected against measured outcome, as a table.
+"""Stability at the extremes: expected against measured outcome, as a table.
 
 CI tier: the fast variants (2D, element size 0.1, a few steps) of every case of
 :func:`fem_anim.bench.extreme_cases.cases` and the P1/P2 locking study; the full 3D grid is
@@ -107,17 +107,16 @@ def test_p1_locks_near_incompressibility_p2_does_not(table):
         assert abs(r["reference"] / r["beam_theory"] - 1) < 0.05
 
 
-#: Cases known to miss their derived expectation with the default Hessian mode. Until session
-#: 6 (exact Newton the default) "nu = 0.4999, P2" was one: exact stops at time.min_dt
-#: (DIVERGED_LINE_SEARCH) where auto, the default since, finishes it (README "Stability at
-#: the extremes").
+#: Cases known to miss their derived expectation with the default Hessian mode (with exact
+#: Newton, "nu = 0.4999, P2" stops at time.min_dt with DIVERGED_LINE_SEARCH where auto, the
+#: default, finishes it).
 EXACT_MISSES: tuple[str, ...] = ()
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", [pytest.param(
     c, marks=pytest.mark.xfail(strict=True, reason="exact Newton stops at time.min_dt; auto "
-                               "finishes (issue 20)")) if c.name in EXACT_MISSES else c
+                               "finishes")) if c.name in EXACT_MISSES else c
     for c in FULL], ids=[c.name for c in FULL])
 def test_extreme_full(case, table):
     _check(case, table, "full")

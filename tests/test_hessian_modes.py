@@ -1,4 +1,4 @@
-"""solver.hessian = abs, trust_region_filter and auto on scenes (issue 20).
+"""solver.hessian = abs, trust_region_filter and auto on scenes.
 
 The crushed cube of tests/test_solver_menu.py (a soft StVK cube squeezed by a press moving
 5 cm per step: exact Newton fails at step 1), an easy scene where auto must be exact Newton
@@ -424,9 +424,8 @@ def _assert_finished_undisturbed(rows: list[dict], frames: int) -> None:
 
 @pytest.mark.slow
 def test_default_scene_3000_steps_without_a_retry():
-    """Issue 20 point 2: the default scene as shipped (Newmark, Rayleigh beta = 1e-4, exact
-    Newton) runs its 50 s: measured 6368 Newton iterations, no retry, E never above E(0)
-    (README "Hessian modes on hard steps")."""
+    """The default scene as shipped (Newmark, Rayleigh beta = 1e-4, exact Newton) runs its
+    50 s: measured 6368 Newton iterations, no retry, E never above E(0)."""
     _assert_finished_undisturbed(_default_run(3000, "exact"), 3000)
 
 
@@ -434,9 +433,9 @@ def test_default_scene_3000_steps_coarse():
     """The reduced variant (CI): the same scene at mesh.element_size = 0.1 runs 3000 frames
     without a retry; undamped, the same mesh retries, or stops, within the same 50 s, so the
     damping, not the coarse mesh, is what lets it finish. (Measured undamped: first retries
-    from t = 20.1 s, 77 retries, then a stop at time.min_dt at t = 22.9 s; in session 6, with
-    the inertia term assembled in the forms, from t = 12.8 s and a stop at t = 44.2 s: the
-    undamped trajectory is chaotic, round-off moves those times.)"""
+    from t = 20.1 s, 77 retries, then a stop at time.min_dt at t = 22.9 s; with the inertia
+    term assembled in the forms, from t = 12.8 s and a stop at t = 44.2 s: the undamped
+    trajectory is chaotic, round-off moves those times.)"""
     coarse = ["mesh.element_size=0.1"]
     _assert_finished_undisturbed(_default_run(3000, "exact", coarse), 3000)
     try:
@@ -487,7 +486,7 @@ def test_mpi_equals_serial(tmp_path, hessian):
 
 @pytest.mark.mpi
 def test_trust_region_under_mpi():
-    """``tests/mpi_trust_region_check.py``: the crushed StVK cube with cg-icc and auto on 2
+    """``tests/mpi/mpi_trust_region_check.py``: the crushed StVK cube with cg-icc and auto on 2
     ranks (block-Jacobi ICC of the AIJ copy; the radius and KSPSTCG's model value are the
     same on every rank, checked) takes trust-region iterations on both ranks, converges every
     step, crushes the cube to its press, and reaches the serial run's first minimiser."""
@@ -499,7 +498,7 @@ def test_trust_region_under_mpi():
     mpirun = mpirun_command(2)
     if mpirun is None:
         pytest.skip("mpirun not available")
-    script = str(ROOT / "tests" / "mpi_trust_region_check.py")
+    script = str(ROOT / "tests" / "mpi" / "mpi_trust_region_check.py")
     out = {}
     for ranks, prefix in ((1, []), (2, mpirun)):
         r = subprocess.run([*prefix, sys.executable, script], capture_output=True, text=True,

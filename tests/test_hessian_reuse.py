@@ -1,4 +1,4 @@
-"""Cheaper Hessians (issue 18, point 2): ``solver.hessian_update`` and L-BFGS on the rest Hessian.
+"""Cheaper Hessians: ``solver.hessian_update`` and L-BFGS on the rest Hessian.
 
 Each option must stop at exact Newton's residual test with exact Newton's answer, while the
 stats prove the Hessian was really kept: fewer assemblies than iterations, fewer

@@ -1,4 +1,4 @@
-"""Imports run one way (STYLE rule 15): no module of the package imports its caller.
+"""Imports run one way: no module of the package imports its caller.
 
 The graph of ``fem_anim`` modules is read from every ``import`` statement, at module level
 and inside functions (lazy imports count: a cycle through one is still a cycle), and must

@@ -1,4 +1,4 @@
-"""Independent checks of the physical terms and the solver's safeguards (issue 19).
+"""Independent checks of the physical terms and the solver's safeguards.
 
 Each check compares with something the library does not compute itself:
 
@@ -303,7 +303,8 @@ def test_inversion_filter_halves_a_constructed_step(tmp_path):
 
 # -- stopping tests -----------------------------------------------------------------------------
 def test_every_accepted_step_meets_the_residual_test():
-    """A short hanging-beam run with the library defaults: every row meets the README test."""
+    """A short hanging-beam run with the library defaults: every row meets the documented
+    residual test."""
     sim = Simulation(load_scene(None, ["mesh.size=[1.0, 0.1, 0.1]", "mesh.element_size=0.1",
                                        "time.steps=6"]), MPI.COMM_WORLD)
     rtol, atol, _, _ = sim.minimiser.snes.getTolerances()

@@ -1,9 +1,9 @@
 """Meshes a user asks for: gmsh primitives, mesh files, closed surfaces, and bad meshes.
 
-Volumes are summed in numpy over the same points and cells DOLFINx is given (STYLE rule 12)
-and compared with the analytic ones: curved boundaries are inscribed polygons, so the
-relative shortfall is about ``(h / rho)^2 / 3`` for element size ``h`` and smallest radius
-of curvature ``rho``; the tolerance is ``(h / rho)^2 / 2``.
+Volumes are summed in numpy over the same points and cells DOLFINx is given and compared
+with the analytic ones: curved boundaries are inscribed polygons, so the relative shortfall
+is about ``(h / rho)^2 / 3`` for element size ``h`` and smallest radius of curvature
+``rho``; the tolerance is ``(h / rho)^2 / 2``.
 """
 
 from __future__ import annotations
@@ -451,7 +451,7 @@ def test_structured_box_is_a_conforming_grid_of_equal_simplices(size, divisions)
 
 
 def test_structured_scene_gives_the_peers_beam(tmp_path):
-    """mesh.divisions = [30, 8, 8]: the 11 520 tetrahedra of issue 18's beam, in DOLFINx."""
+    """mesh.divisions = [30, 8, 8]: the 11 520 tetrahedra of the peers' hanging beam, in DOLFINx."""
     scene = scene_with("mesh.divisions=[30, 8, 8]")
     mesh = build(scene)
     assert mesh.mesh.topology.index_map(3).size_global == 11520

@@ -1,4 +1,4 @@
-"""The mixed (u, p) formulation for nearly and exactly incompressible solids (issue 17).
+"""The mixed (u, p) formulation for nearly and exactly incompressible solids.
 
 Taylor-Hood P2/P1 with the perturbed Lagrangian of ``fem_anim/forms/incompressible.py``:
 

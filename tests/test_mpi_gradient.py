@@ -1,5 +1,5 @@
 """The residual SNES solves with is the gradient of the objective it minimises, on 2 ranks
-(``tests/mpi_gradient_check.py``: a moving press, pinned dofs owned by both ranks)."""
+(``tests/mpi/mpi_gradient_check.py``: a moving press, pinned dofs owned by both ranks)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 import pytest
 from conftest import ROOT, clean_environment, mpirun_command
 
-SCRIPT = ROOT / "tests" / "mpi_gradient_check.py"
+SCRIPT = ROOT / "tests" / "mpi" / "mpi_gradient_check.py"
 
 
 @pytest.mark.mpi

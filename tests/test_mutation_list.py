@@ -1,6 +1,6 @@
 """The mutation check's list cannot rot: every planted bug still applies, every test exists.
 
-``tests/mutation_check.py`` (not run by CI) plants each bug of its list in a scratch copy
+``tests/tools/mutation_check.py`` (not run by CI) plants each bug of its list in a scratch copy
 and runs the named tests. This fast test fails when the code changes under the list: an
 original text that no longer occurs exactly once, or a selected test that no longer exists.
 """
@@ -8,8 +8,11 @@ original text that no longer occurs exactly once, or a selected test that no lon
 from __future__ import annotations
 
 import re
+import sys
+from pathlib import Path
 
-from mutation_check import MUTATIONS, ROOT, check_list
+sys.path.insert(0, str(Path(__file__).resolve().parent / "tools"))
+from mutation_check import MUTATIONS, ROOT, check_list  # noqa: E402
 
 
 def test_every_original_text_occurs_once():

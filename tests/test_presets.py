@@ -6,8 +6,8 @@ the final displacement in ``final.vtu``. The iterative presets solve each Newton
 a relative residual of 1e-10, so Newton ends at the same minimiser. Measured: energies
 within 1.3e-12 and displacements within 6e-14 (relative) of ``cholesky``, the classical
 Richardson iterations included (damped Jacobi, Gauss-Seidel and SOR all converge on this
-Hessian; see :mod:`fem_anim.solver.presets`). Asserted: 2e-11 and 1e-12 (README: "the same steps
-to 1e-12"). Every stats row of every preset meets the residual test.
+Hessian; see :mod:`fem_anim.solver.presets`). Asserted: 2e-11 and 1e-12. Every stats row
+of every preset meets the residual test.
 
 Precedence, lowest to highest: defaults < preset < scene ``[solver.petsc]`` < command line,
 observed through ``linear_its`` with ``cg-jacobi`` and ``ksp_rtol`` set in each layer.

@@ -1,4 +1,4 @@
-"""``solver.mode = "preview"`` and the bench against VBD (issue 18, points 3 and 4).
+"""``solver.mode = "preview"`` and the bench against VBD.
 
 The preview is one Newton step per time step (the linearly implicit step), solved by CG with
 incomplete Cholesky, accepted unconverged: each test checks what it fills in, that explicit

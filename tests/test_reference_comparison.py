@@ -1,4 +1,4 @@
-"""DOLFINx against the numpy reference, on the same P1 mesh (STYLE rule 12).
+"""DOLFINx against the numpy reference, on the same P1 mesh.
 
 Both sides get the cell -> vertex arrays of :func:`fem_anim.reference.box_mesh`: the
 reference assembles over them as they are, DOLFINx after :func:`fem_anim.mesh.build.mesh_from_arrays`

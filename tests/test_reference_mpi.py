@@ -1,6 +1,6 @@
 """Under ``mpirun -n 2``, the DOLFINx side gives the same comparisons with the numpy reference.
 
-Launches ``tests/mpi_reference_check.py`` (see its docstring) on two ranks with the venv's
+Launches ``tests/mpi/mpi_reference_check.py`` (see its docstring) on two ranks with the venv's
 Python: the distributed energy, gradient, Hessian action, step objective, mass matrix and
 ten-step trajectories, gathered to rank 0 in input vertex order and compared there with
 :mod:`fem_anim.reference` to 1e-10 (assembly) and 1e-8 (trajectory positions). Measured on two
@@ -21,7 +21,7 @@ import pytest
 from conftest import ROOT, clean_environment, mpirun_command
 from mpi4py import MPI
 
-SCRIPT = ROOT / "tests" / "mpi_reference_check.py"
+SCRIPT = ROOT / "tests" / "mpi" / "mpi_reference_check.py"
 
 pytestmark = [
     pytest.mark.mpi,

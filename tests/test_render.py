@@ -1,4 +1,4 @@
-"""Issue 7, output a person looks at: frames, GIF, MP4, the energy density field, plots.
+"""Output a person looks at: frames, GIF, MP4, the energy density field, plots.
 
 Two tiny real runs (module fixtures): the hanging beam, coarse, 4 steps, 64x48 pictures;
 and a 2D square in free fall with no pins, whose |u| is the same at every vertex

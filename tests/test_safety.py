@@ -1,4 +1,4 @@
-"""Nothing a user has is ever lost, and every message is true (issue 15).
+"""Nothing a user has is ever lost, and every message is true.
 
 Everything here is the real thing: real signals to a real ``fem-anim run`` process, two
 real concurrent runs, a real full file system (a 300 kB tmpfs) and a real read-only one

@@ -1,6 +1,11 @@
-"""Contact: static obstacles as a smooth barrier in the step objective, contact between
-surfaces by the IPC Toolkit (barrier, CCD, friction), and an independent check that no frame
-has an intersection.
+"""Contact: the terms that keep bodies apart, added to the elastic energy in the step objective.
+
+:mod:`~fem_anim.contact.obstacles` binds static obstacles (a ground plane, a sphere) as a
+smooth barrier with lagged friction over the exterior facets, with the step bound that keeps
+every trial point outside them; :mod:`~fem_anim.contact.ipc` wraps the IPC Toolkit for contact
+between surfaces (bodies with each other and with themselves: barrier, continuous collision
+detection, friction) under MPI; :mod:`~fem_anim.contact.intersection` is an independent check,
+on the tetrahedra alone, that no frame of a run has an intersection. Public names load lazily.
 """
 
 from fem_anim.lazy_exports import lazy_exports

@@ -1,4 +1,4 @@
-"""An independent check that no frame of a run has an intersection (issue 16).
+"""An independent check that no frame of a run has an intersection.
 
 The contact code (:mod:`fem_anim.contact.ipc`) builds its collision surface from DOLFINx's
 exterior facets; this check builds its own from the tetrahedra alone (the triangles that
@@ -15,14 +15,30 @@ __all__ = ["boundary_triangles", "crossed_frames"]
 
 
 def boundary_triangles(cells: np.ndarray) -> np.ndarray:
-    """Triangles of a tetrahedral mesh that belong to one tetrahedron only (numpy)."""
+    """Triangles of a tetrahedral mesh that belong to one tetrahedron only.
+
+    Args:
+        cells: The tetrahedra, (cells, 4) vertex indices.
+
+    Returns:
+        The boundary triangles, (triangles, 3) int32 vertex indices, each row sorted.
+    """
     faces = np.sort(cells[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3), axis=1)
     unique, counts = np.unique(faces, axis=0, return_counts=True)
     return unique[counts == 1].astype(np.int32)
 
 
 def crossed_frames(points: np.ndarray, cells: np.ndarray, frames) -> list[int]:
-    """Indices of the displacements in ``frames`` where a surface triangle crosses another."""
+    """Indices of the frames where a surface triangle crosses another.
+
+    Args:
+        points: The rest positions of the vertices, (vertices, 3).
+        cells: The tetrahedra, (cells, 4) vertex indices.
+        frames: An iterable of displacements, each (vertices, 3), in vertex order.
+
+    Returns:
+        The indices k of ``frames`` where ipctk's ``has_intersections`` is true.
+    """
     import ipctk
 
     F = boundary_triangles(cells)

@@ -8,13 +8,14 @@ g(x) = 1/2 ||x - y||_M^2 + w E(x) (seed eq. 4) the barrier energy
 
 over the point-triangle and edge-edge pairs k of the boundary surface closer than
 d_hat (ipctk 1.6: ``BarrierPotential(dhat, kappa, use_physical_barrier=True)`` on
-``NormalCollisions`` with ``use_area_weighting``; a_k is the pair's share of the surface
-area, so kappa is a pressure in Pa and B is in J, like the obstacles' barrier of
-:mod:`forms.contact`). B is +inf at contact, so every trial point of the line search is
-kept on the collision-free part of the Newton segment by ipctk's continuous collision
-detection (:meth:`IPCContact.step_bound`): no accepted state has an intersection.
+``NormalCollisions`` with ``use_area_weighting``; a_k is the pair's share of the
+surface area, so kappa is a pressure in Pa and B is in J, like the obstacles' barrier
+of :mod:`fem_anim.forms.obstacle_contact`). B is +inf at contact, so every trial point
+of the line search is kept on the collision-free part of the Newton segment by ipctk's
+continuous collision detection (:meth:`IPCContact.step_bound`): no accepted state has an
+intersection.
 
-ipctk is serial: this module is the one seam (STYLE rule 16). The surface vertices (P1
+ipctk is serial: this module is its one MPI wrapper. The surface vertices (P1
 dofs on the exterior facets) are numbered by their global dof block, in order, so each
 rank owns a contiguous run of them; each evaluation gathers their positions x = X + u to
 rank 0, which builds the collision set and evaluates there, then broadcasts scalars and
@@ -31,9 +32,8 @@ previous step (it grows kappa while the minimum distance keeps falling); kappa i
 within a step, so the objective is one function during each minimisation.
 
 ipctk runs on one thread: its parallel loops (TBB) sum in an order that changes from run to
-run, which moved Newton counts by one and the states in their last digits between two runs
-of one scene (measured on the two-cubes scene), so a run resumed from a checkpoint could
-not equal the uninterrupted one. One thread makes every run repeat to the last digit.
+run, so two runs of one scene (and a run resumed from a checkpoint) would differ in their
+last digits. One thread makes every run repeat to the last digit.
 """
 
 from __future__ import annotations
@@ -152,7 +152,15 @@ class IPCContact:
         return self.comm.scatter(parts, root=0)
 
     def positions(self, values: np.ndarray | None = None) -> np.ndarray | None:
-        """x = X + u (or ``values``, a local dof array, without X) at the surface, rank 0."""
+        """Surface vertex rows gathered to rank 0, in collision order (collective).
+
+        Args:
+            values: A local dof array to gather instead of the positions (no X added);
+                None for the current positions x = X + u.
+
+        Returns:
+            The (surface vertices, gdim) array on rank 0; None on the other ranks.
+        """
         if values is None:
             u = self.u.x.array.reshape(-1, self.gdim)[self.blocks]
             x = self._gather(u)
@@ -172,7 +180,14 @@ class IPCContact:
 
     # -- energy, gradient, Hessian -------------------------------------------------------------
     def energy(self, friction: bool = True) -> float:
-        """kappa B(x) (+ D(x) with friction) (J) at the current ``u``; +inf at contact."""
+        """The barrier energy kappa B(x) at the current ``u`` (collective).
+
+        Args:
+            friction: Add the step's lagged friction potential D(x), if one is staged.
+
+        Returns:
+            kappa B(x) (+ D(x)) in J, the same on every rank; +inf at contact.
+        """
         x = self._update()
         start = time.perf_counter()
         value = None
@@ -184,7 +199,12 @@ class IPCContact:
         return self.comm.bcast(value, root=0)
 
     def add_gradient(self, b: PETSc.Vec, scale: float) -> None:
-        """b += scale kappa grad B(x) on the owned surface dofs (collective)."""
+        """Add ``scale`` kappa grad B(x) (+ grad D) to ``b`` on the owned surface dofs (collective).
+
+        Args:
+            b: The local gradient vector (owned entries are updated in place).
+            scale: The factor applied to the barrier's gradient (the integrator weight w).
+        """
         x = self._update()
         start = time.perf_counter()
         grad = None
@@ -201,8 +221,14 @@ class IPCContact:
         self.timers["barrier_s"] += time.perf_counter() - start
 
     def add_hessian(self, A: PETSc.Mat, scale: float) -> None:
-        """A += scale kappa Hess B(x)^+ (per-pair PSD projection), rows and columns of
-        pinned dofs left out; A must accept new nonzeros (collective; before assembly)."""
+        """Add ``scale`` kappa Hess B(x)^+ (per-pair PSD projection) to ``A`` (collective).
+
+        Rows and columns of pinned dofs are left out. Call before ``A.assemble()``.
+
+        Args:
+            A: The Hessian matrix; it must accept new nonzeros.
+            scale: The factor applied to the barrier's Hessian (the integrator weight w).
+        """
         x = self._update()
         start = time.perf_counter()
         parts = None
@@ -235,8 +261,15 @@ class IPCContact:
 
     # -- admissibility ----------------------------------------------------------------------
     def step_bound(self, y: np.ndarray) -> float:
-        """Largest alpha <= 1 with x - alpha' y collision free for all alpha' <= alpha
-        (ipctk's CCD, with its conservative rescaling); ``y`` a local dof array."""
+        """The largest collision-free step along the update ``-y`` (collective).
+
+        Args:
+            y: The Newton update as a local dof array (the trial point is x - alpha y).
+
+        Returns:
+            The largest alpha <= 1 with x - alpha' y collision free for all alpha' <= alpha
+            (ipctk's continuous collision detection, with its conservative rescaling).
+        """
         x0 = self._update()
         dy = self.positions(y)
         start = time.perf_counter()
@@ -248,11 +281,16 @@ class IPCContact:
     # -- stiffness schedule -------------------------------------------------------------------
     def stage(self, weight: float, grad_energy: np.ndarray, average_mass: float,
               h: float) -> None:
-        """Set kappa (and the lagged friction) for a step of size h with integrator weight
-        w, at the current ``u`` = u_n.
+        """Set kappa (and the lagged friction) for the next step, at the current ``u`` = u_n.
 
-        ``grad_energy`` is grad E on the local dofs; IPC's kappa multiplies a barrier
-        added to the whole objective, ours sits inside w E, so kappa = kappa_IPC / w.
+        IPC's kappa multiplies a barrier added to the whole objective; here the barrier sits
+        inside w E (seed eq. 4, w = h^2/4 for Newmark), so kappa = kappa_IPC / w.
+
+        Args:
+            weight: The integrator weight w of E in the step objective.
+            grad_energy: grad E on the local dofs (for the adaptive stiffness).
+            average_mass: The mean lumped mass per vertex (ipctk's lower bound on kappa).
+            h: The time step (s); friction smooths over ``epsv`` h.
         """
         self.weight = weight
         self.friction = None
@@ -302,11 +340,19 @@ class IPCContact:
             if self.num_pairs else np.inf
 
     def state(self) -> dict[str, float]:
-        """What a checkpoint keeps across steps (rank 0's): the adaptive kappa's floor."""
+        """What a checkpoint keeps across steps.
+
+        Returns:
+            ``{"kappa_floor": ...}``: rank 0's floor of the adaptive kappa.
+        """
         return {"kappa_floor": float(self.kappa_floor)}
 
     def restore(self, state: dict[str, float]) -> None:
-        """Continue from a checkpoint's :meth:`state` (an older one: the floor starts at 0)."""
+        """Continue from a checkpoint.
+
+        Args:
+            state: What :meth:`state` returned (without ``kappa_floor``, the floor is 0).
+        """
         self.kappa_floor = float(state.get("kappa_floor", 0.0))
 
     def finish_step(self) -> None:

@@ -1,8 +1,9 @@
 """Obstacles of a scene bound to DOLFINx: the contact terms and the step bound that guards them.
 
 :class:`ObstacleContact` turns the scene's ``[[obstacle]]`` tables (a ground plane or a
-static sphere) into the UFL terms of :mod:`forms.contact` over the body's exterior
-facets, and keeps every iterate admissible: the barrier is +inf at d <= 0, so
+static sphere) into the UFL terms of :mod:`fem_anim.forms.obstacle_contact` over the body's
+exterior facets, added to E in the step objective g(x) = 1/2 ||x - y||_M^2 + w E(x) (seed
+eq. 4), and keeps every iterate admissible: the barrier is +inf at d <= 0, so
 
 * :meth:`step_bound` gives the largest alpha in (0, 1] such that the trial x - alpha y keeps
   every contact point at no less than :data:`KEEP_FRACTION` of its current distance
@@ -31,10 +32,9 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem_anim.forms import obstacle_contact as contact_forms
-
 from fem_anim import compat
 from fem_anim.errors import SceneError
+from fem_anim.forms import obstacle_contact as contact_forms
 
 __all__ = ["ObstacleContact", "KEEP_FRACTION", "contact_quadrature"]
 
@@ -49,6 +49,13 @@ def contact_quadrature(degree: int, tdim: int) -> tuple[np.ndarray, dict]:
     gets its share of the boundary area). FFCx 0.5's own ``"vertex"`` scheme takes the
     cell's vertices instead of the facet's for a facet integral, so the rule is passed
     as a custom one. P2: basix's default (symmetric) rule of degree 2.
+
+    Args:
+        degree: Lagrange degree of the displacement (1 or 2).
+        tdim: Topological dimension of the mesh (2 or 3).
+
+    Returns:
+        The reference facet points, (points, tdim - 1), and the ``metadata`` of ``ufl.ds``.
     """
     facet_name = {2: "interval", 3: "triangle"}[tdim]
     facet = compat.basix_cell(facet_name)
@@ -142,7 +149,14 @@ class ObstacleContact:
         with b' <= 0 and, for a sphere, Hess d = (I - r r^T/|r|^2)/|r| >= 0: its tangential
         eigenvalues kappa/d_hat b'/|r| are negative and, near contact, can make the step
         Hessian indefinite. Adding -kappa/d_hat b' Hess d removes them (IPC's per-contact
-        projection); a plane's Hessian is exact and PSD already. None without spheres.
+        projection); a plane's Hessian is exact and PSD already.
+
+        Args:
+            du: The trial function of the Hessian form.
+            dv: The test function of the Hessian form.
+
+        Returns:
+            The UFL bilinear form to add to the Hessian, or None without spheres.
         """
         terms = []
         for ob, geo in self._distance:
@@ -160,7 +174,11 @@ class ObstacleContact:
         return next(geo for o, geo in self._distance if o is ob)
 
     def stage(self, h: float) -> None:
-        """Set the step size h of friction's smoothing length eps_v h."""
+        """Set the step size h of friction's smoothing length eps_v h.
+
+        Args:
+            h: The time step (s).
+        """
         self.step_size.value = h
 
     # -- contact points ---------------------------------------------------------------------
@@ -214,19 +232,35 @@ class ObstacleContact:
         return self.comm.allreduce(float(values.min()) if values.size else np.inf, op=MPI.MIN)
 
     def min_distance(self) -> float:
-        """Smallest d over every contact point, obstacle and rank (for the current ``u``)."""
+        """Smallest d over every contact point, obstacle and rank (collective).
+
+        Returns:
+            The signed distance (m) at the current ``u``; inf without contact points.
+        """
         x, _ = self._evaluate()
         return min((self._global_min(d) for d in self._distances(x)), default=np.inf)
 
     def distances(self) -> list[float]:
-        """Smallest d per obstacle over all ranks, for the current ``u``."""
+        """Smallest d per obstacle over all ranks, for the current ``u`` (collective).
+
+        Returns:
+            One distance (m) per obstacle, in scene order.
+        """
         x, _ = self._evaluate()
         return [self._global_min(d) for d in self._distances(x)]
 
     def step_bound(self, y: PETSc.Vec) -> float:
-        """Largest alpha <= 1 with d(x - alpha y) >= KEEP_FRACTION d(x) at every contact point.
+        """Largest alpha <= 1 keeping d(x - alpha y) >= KEEP_FRACTION d(x) at every point.
 
-        ``u`` must hold the current iterate x (with ghosts); ``y`` is the search direction.
+        Exact per contact point (d is linear in alpha for a plane; for a sphere the first
+        root of a quadratic); the minimum is reduced over all ranks (collective).
+
+        Args:
+            y: The search direction (the trial point is x - alpha y); ``u`` must hold the
+                current iterate x, ghosts updated.
+
+        Returns:
+            The step bound alpha in (0, 1], the same on every rank.
         """
         direction = compat.petsc_vec(self.direction)
         with y.localForm() as y_local, direction.localForm() as target:

@@ -1,5 +1,11 @@
-"""Run outputs: the trajectory, per-step statistics and final state (gathered to rank 0), the
-run directory that marks and locks what fem_anim owns, and the provenance of every number.
+"""Output: what a run leaves on disk and where its numbers came from.
+
+:mod:`~fem_anim.output.files` gathers displacements and cell values to rank 0 in input order
+and writes the trajectory (XDMF + HDF5), ``stats.csv``, ``final.vtu`` and ``scene.json``
+through a staging area; :mod:`~fem_anim.output.rundir` marks, locks and installs a run
+directory so fem_anim only ever replaces files it wrote; :mod:`~fem_anim.output.provenance`
+records the software stack and the wall time per phase for ``summary.json``. Public names
+load lazily.
 """
 
 from fem_anim.lazy_exports import lazy_exports

@@ -9,8 +9,8 @@ file posing as a result, and keeps its staging area for ``--resume``.
 Files: ``trajectory.xdmf`` + ``trajectory.h5`` (displacement and cell energy density
 per frame, ParaView and meshio read it), ``stats.csv`` (one row per step), ``final.vtu``
 (point data ``displacement``, cell data ``energy_density``), ``scene.json`` (the validated
-scene) and, from :mod:`fem_anim.render.animation` and :mod:`fem_anim.render.plots`, the pictures in
-:data:`RENDER_PRODUCTS`.
+scene) and, from :mod:`fem_anim.render.animation` and :mod:`fem_anim.render.plots`, the
+pictures in :data:`RENDER_PRODUCTS`.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from fem_anim import compat
 from fem_anim.errors import FemAnimError, describe_os_error
 from fem_anim.mesh.build import SimplexMesh
 from fem_anim.output.rundir import (RENDER_PRODUCTS, STAGING, claim, install, read_manifest,
-                     write_atomically)
+                                    write_atomically)
 
 __all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "TrajectoryWriter",
            "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS"]
@@ -42,7 +42,12 @@ STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "s
 
 
 class VertexGather:
-    """Collects a vector Function's vertex values on rank 0 in input vertex order."""
+    """Collects a vector Function's vertex values on rank 0 in input vertex order.
+
+    Args:
+        domain: The mesh with its input points and each local vertex's input index.
+        V: The P1 (vector or scalar) function space the values live in.
+    """
 
     def __init__(self, domain: SimplexMesh, V):
         mesh = domain.mesh
@@ -61,7 +66,14 @@ class VertexGather:
                                           else None, root=0)
 
     def gather(self, values: np.ndarray) -> np.ndarray | None:
-        """Vertex values (num_points, bs) on rank 0, ``None`` elsewhere."""
+        """Gather the vertex values of a local dof array (collective).
+
+        Args:
+            values: The Function's local dof array (owned and ghost entries).
+
+        Returns:
+            The values (num_points, bs) in input vertex order on rank 0; None elsewhere.
+        """
         local = values.reshape(-1, self.bs)[self.node_to_dof]
         parts = self.comm.gather((self.input_index, local), root=0)
         if self.comm.rank != 0:
@@ -77,6 +89,9 @@ class CellGather:
 
     DOLFINx keeps each cell's row in the input array (``topology.original_cell_index``);
     the owned cells of all ranks together are the input cells, each once.
+
+    Args:
+        domain: The mesh with its input cells.
     """
 
     def __init__(self, domain: SimplexMesh):
@@ -88,7 +103,14 @@ class CellGather:
                                          else None, root=0)
 
     def gather(self, values: np.ndarray) -> np.ndarray | None:
-        """Values of the owned cells (local order) as (num_cells,) on rank 0, else ``None``."""
+        """Gather one value per owned cell (collective).
+
+        Args:
+            values: One value per owned cell, in local cell order.
+
+        Returns:
+            The values (num_cells,) in input cell order on rank 0; None elsewhere.
+        """
         parts = self.comm.gather((self.input_index, values), root=0)
         if self.comm.rank != 0:
             return None
@@ -113,6 +135,15 @@ class RunDirectory:
     refuses a directory whose staging area holds a checkpoint (an unfinished run that
     could be resumed); one without a checkpoint is only a failed start, and is replaced.
     Every decision is taken on rank 0 and raised on every rank.
+
+    Args:
+        path: The output directory (created if missing).
+        comm: The run's communicator.
+        resume: Continue the unfinished run staged there instead of starting afresh.
+
+    Raises:
+        FemAnimError: (collectively) if the directory is not fem_anim's, is in use, holds
+            an unfinished run (fresh start) or none (``resume``), or cannot be written.
     """
 
     def __init__(self, path: Path, comm: MPI.Comm, resume: bool = False):
@@ -151,12 +182,25 @@ class RunDirectory:
         self.staging.mkdir()
 
     def file(self, name: str) -> Path:
-        """Where to write ``name`` while the run is in progress."""
+        """Where to write a result file while the run is in progress.
+
+        Args:
+            name: The file's name in the output directory.
+
+        Returns:
+            Its path in the staging area.
+        """
         return self.staging / name
 
     def commit(self) -> None:
-        """Install the staged files (each rename atomic), dropping the checkpoint and the
-        pictures of an older run (:func:`fem_anim.output.rundir.install`); collective."""
+        """Install the staged files (each rename atomic), collectively.
+
+        Drops the checkpoint and the pictures of an older run
+        (:func:`fem_anim.output.rundir.install`).
+
+        Raises:
+            FemAnimError: (collectively) if the files cannot be moved into place.
+        """
         error = None
         if self.comm.rank == 0:
             try:
@@ -182,7 +226,13 @@ class RunDirectory:
 
 
 class StatsWriter:
-    """``stats.csv``: one row per completed step, flushed as it is written (rank 0)."""
+    """``stats.csv``: one row per completed step, flushed as it is written (rank 0).
+
+    Args:
+        path: The file to write (overwritten).
+        comm: The run's communicator (only rank 0 writes).
+        rows: Rows already written by a run being resumed, written first.
+    """
 
     def __init__(self, path: Path, comm: MPI.Comm, rows: list[dict] = ()):
         self.rank0 = comm.rank == 0
@@ -195,6 +245,11 @@ class StatsWriter:
                 self.write(row)
 
     def write(self, row: dict) -> None:
+        """Append one row and flush it.
+
+        Args:
+            row: The step's statistics by :data:`STATS_COLUMNS` name (missing ones empty).
+        """
         if self.rank0:
             # a checkpoint written before a column existed resumes with it empty
             self._writer.writerow({k: row.get(k, "") for k in STATS_COLUMNS})
@@ -216,7 +271,16 @@ class TrajectoryWriter:
     vertex displacements, plus ``energy_density{k}`` its cells' mean psi), so meshio's
     TimeSeriesReader and ParaView read it. Each frame is flushed to the HDF5 file
     and the small XDMF file is rewritten atomically, listing only complete frames: after
-    a kill between frames the pair is readable, and :meth:`reopen` continues it.
+    a kill between frames the pair is readable, and ``keep_frames`` continues it.
+
+    Args:
+        path: The ``.xdmf`` file; the HDF5 file sits beside it with suffix ``.h5``.
+        domain: The mesh (its input points and cells are written once).
+        keep_frames: None for a new file; for a resumed run, the number of frames of the
+            existing file to keep (later ones are dropped).
+
+    Raises:
+        OSError: (rank 0) if a resumed file holds fewer than ``keep_frames`` frames.
     """
 
     CELL_TYPES = {3: ("triangle", "Triangle"), 4: ("tetra", "Tetrahedron")}
@@ -256,7 +320,13 @@ class TrajectoryWriter:
 
     def write(self, time: float, displacement: np.ndarray | None,
               energy_density: np.ndarray | None) -> None:
-        """Append a frame: vertex displacements (input order) and cell energy densities."""
+        """Append a frame (rank 0 writes; other ranks pass None).
+
+        Args:
+            time: The frame's time (s).
+            displacement: Vertex displacements (num_points, gdim) in input order.
+            energy_density: Each cell's mean energy density (num_cells,) in input order.
+        """
         if not self.rank0:
             return
         k = len(self.times)
@@ -306,8 +376,14 @@ class TrajectoryWriter:
 
 def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None,
                 energy_density: np.ndarray | None = None) -> None:
-    """``final.vtu``: the input mesh with point data ``displacement`` and cell data
-    ``energy_density`` (rank 0)."""
+    """Write ``final.vtu``: the input mesh with the final state (rank 0 writes).
+
+    Args:
+        path: The file to write.
+        domain: The mesh (input points and cells).
+        displacement: Point data ``displacement`` (num_points, gdim), input order.
+        energy_density: Cell data ``energy_density`` (num_cells,), if given.
+    """
     if domain.mesh.comm.rank != 0:
         return
     import meshio
@@ -320,7 +396,13 @@ def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None
 
 
 def write_scene(path: Path, scene, comm: MPI.Comm) -> None:
-    """``scene.json``: the validated scene of the run, for ``fem-anim render`` (rank 0)."""
+    """Write ``scene.json``: the validated scene of the run, for ``fem-anim render``.
+
+    Args:
+        path: The file to write (atomically, by rank 0).
+        scene: The validated :class:`~fem_anim.scene.schema.Scene`.
+        comm: The run's communicator.
+    """
     if comm.rank == 0:
         write_atomically(path, (json.dumps({"source": scene.source, "scene": scene.data},
                                            indent=1) + "\n").encode())

@@ -25,7 +25,14 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 
 
 def git_commit(path: Path = PACKAGE_DIR) -> str | None:
-    """The commit of the git checkout holding ``path`` (``+dirty`` if it has changes), or None."""
+    """The commit of the git checkout holding a path.
+
+    Args:
+        path: A file or folder inside the checkout (default: this package).
+
+    Returns:
+        The HEAD commit (``+dirty`` if tracked files changed), or None outside a checkout.
+    """
     try:
         head = subprocess.run(["git", "-C", str(path), "rev-parse", "HEAD"], text=True,
                               capture_output=True, timeout=10)
@@ -40,7 +47,11 @@ def git_commit(path: Path = PACKAGE_DIR) -> str | None:
 
 
 def mumps_version() -> str | None:
-    """The MUMPS release PETSc loaded, read off the shared library's name (Linux)."""
+    """The MUMPS release PETSc loaded, read off the shared library's name (Linux).
+
+    Returns:
+        The version string, or None if no MUMPS library is mapped into the process.
+    """
     try:
         maps = Path("/proc/self/maps").read_text()
     except OSError:
@@ -57,7 +68,15 @@ def _distribution(name: str) -> str | None:
 
 
 def software_versions(comm) -> dict:
-    """The versions of everything a run's numbers depend on (call after PETSc is loaded)."""
+    """The versions of everything a run's numbers depend on (call after PETSc is loaded).
+
+    Args:
+        comm: The run's communicator (its size is recorded).
+
+    Returns:
+        Package name -> version (None if not installed), plus the git commit, the MPI
+        library and ``mpi_ranks``.
+    """
     import basix
     import dolfinx
     import ffcx
@@ -96,6 +115,11 @@ class WallClock:
 
     @contextmanager
     def phase(self, name: str):
+        """Add the wall time of a ``with`` block to a phase.
+
+        Args:
+            name: One of :attr:`PHASES`.
+        """
         start = time.perf_counter()
         try:
             yield
@@ -103,9 +127,20 @@ class WallClock:
             self.seconds[name] += time.perf_counter() - start
 
     def add(self, name: str, seconds: float) -> None:
+        """Add time measured elsewhere to a phase.
+
+        Args:
+            name: One of :attr:`PHASES`.
+            seconds: The wall time to add.
+        """
         self.seconds[name] += seconds
 
     def as_dict(self) -> dict[str, float]:
+        """The phases for ``summary.json``.
+
+        Returns:
+            ``{phase}_s`` per phase and ``total_s``, rounded to microseconds.
+        """
         out = {f"{k}_s": round(v, 6) for k, v in self.seconds.items()}
         out["total_s"] = round(sum(self.seconds.values()), 6)
         return out

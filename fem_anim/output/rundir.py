@@ -16,7 +16,8 @@ runs and renderings made there (its *manifest*). Then:
   however it dies, so a stale lock never blocks a new run; the file keeps the holder's
   pid, which the refusal names.
 
-Rank 0 calls these; :class:`fem_anim.output.files.RunDirectory` makes the decisions collective.
+Rank 0 calls these; :class:`fem_anim.output.files.RunDirectory` makes the decisions
+collective.
 """
 
 from __future__ import annotations
@@ -34,15 +35,19 @@ __all__ = ["MARKER", "LOCK", "STAGING", "claim", "check_not_in_use", "install",
 MARKER = ".fem_anim-run"
 LOCK = ".fem_anim-lock"
 STAGING = ".partial"
-#: Files :mod:`fem_anim.render.animation` and :mod:`fem_anim.render.plots` make from a run: a new run
-#: into the same directory removes the old ones (those of the manifest), so no picture
-#: outlives its data.
+#: Files :mod:`fem_anim.render.animation` and :mod:`fem_anim.render.plots` make from a run:
+#: a new run into the same directory removes the old ones (those of the manifest), so no
+#: picture outlives its data.
 RENDER_PRODUCTS = ("final.png", "frames", "animation.gif", "animation.mp4", "energies.png",
                    "newton.png")
 
 
 def write_atomically(path: Path, data: bytes) -> None:
     """Write a file so that it is either complete or absent: temp file, fsync, rename.
+
+    Args:
+        path: The file to write.
+        data: Its whole content.
 
     Raises:
         OSError: naming ``path`` (a full disk reports no file name by itself); the
@@ -62,7 +67,14 @@ def write_atomically(path: Path, data: bytes) -> None:
 
 
 def read_manifest(path: Path) -> set[str]:
-    """The files (relative POSIX paths) fem_anim wrote in the run directory ``path``."""
+    """The files fem_anim wrote in a run directory.
+
+    Args:
+        path: The run directory.
+
+    Returns:
+        Relative POSIX paths; empty if the marker is missing or unreadable.
+    """
     try:
         return set(json.loads((Path(path) / MARKER).read_text()).get("files", []))
     except (OSError, ValueError, AttributeError):
@@ -70,13 +82,21 @@ def read_manifest(path: Path) -> set[str]:
 
 
 def write_manifest(path: Path, files: set[str]) -> None:
-    """Rewrite the marker of ``path`` with the manifest ``files`` (temp file and rename)."""
+    """Rewrite a run directory's marker with its manifest (temp file and rename).
+
+    Args:
+        path: The run directory.
+        files: Relative POSIX paths of the files fem_anim owns there.
+    """
     text = json.dumps({"fem_anim": "run directory", "files": sorted(files)}, indent=1) + "\n"
     write_atomically(Path(path) / MARKER, text.encode())
 
 
 def claim(path: Path) -> int:
     """Make ``path`` a run directory of this process: create or check it, mark it, lock it.
+
+    Args:
+        path: The output directory.
 
     Returns:
         The file descriptor holding the lock (close it to release the directory).
@@ -112,6 +132,9 @@ def claim(path: Path) -> int:
 
 def check_not_in_use(path: Path) -> None:
     """Refuse a directory a live run holds (``fem-anim render`` while it is written).
+
+    Args:
+        path: The run directory.
 
     Raises:
         FemAnimError: naming the holder's pid.

@@ -5,15 +5,16 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.tensor` - column-major ``vec`` (eq. (30)), cofactor, polar decomposition;
 * :mod:`.materials` - ``psi``, ``P``, ``dP/dF`` of each material model (section 4.4);
 * :mod:`.geometry` - ``D_m``, ``D_s``, ``F = D_s D_m^{-1}``, ``w``, ``G_e`` (eqs. (25)-(34));
-* :mod:`.mesh` - structured box meshes for tests;
+* :mod:`.box_mesh` - structured box meshes for tests;
 * :mod:`.assembly` - global elastic energy, gradient and Hessian (eq. (27));
 * :mod:`.mass` - consistent and lumped mass matrices (eqs. (17)-(20)), gravity potential;
-* :mod:`.problem` - the potential energy with mass and pins;
-* :mod:`.mixed` - the perturbed-Lagrangian (u, p) energy of the mixed formulation (P1/P1);
-* :mod:`.contact` - the IPC log barrier against a plane or sphere obstacle and its lagged
-  friction (vertex rule);
+* :mod:`.potential` - the potential energy with mass and pins;
+* :mod:`.mixed_energy` - the perturbed-Lagrangian (u, p) energy of the mixed formulation
+  (P1/P1);
+* :mod:`.obstacle_barrier` - the IPC log barrier against a plane or sphere obstacle and its
+  lagged friction (vertex rule);
 * :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
-* :mod:`.integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
+* :mod:`.time_integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
 """
 
 from fem_anim.reference.assembly import elastic_energy, elastic_gradient, elastic_hessian

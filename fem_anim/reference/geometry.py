@@ -28,6 +28,10 @@ __all__ = [
 def check_mesh(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Validate and normalise a simplex mesh.
 
+    Args:
+        points: Vertex positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
+
     Returns:
         ``points`` as float and ``cells`` as int arrays.
 
@@ -52,12 +56,24 @@ def check_mesh(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def cell_dofs(cells: np.ndarray, d: int) -> np.ndarray:
-    """Global dof numbers of each element, ``(n_cells, (d+1) d)``, local order ``i*d + k``."""
+    """Global dof numbers of each element.
+
+    Args:
+        cells: Simplices, ``(n_cells, d + 1)``.
+        d: The dimension.
+
+    Returns:
+        ``(n_cells, (d+1) d)`` array, local order ``i*d + k``.
+    """
     return (cells[:, :, None] * d + np.arange(d)).reshape(len(cells), -1)
 
 
 def rest_shape_matrix(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Reference shape matrices ``D_m`` with columns ``X_i - X_last`` (seed eq. (25)).
+
+    Args:
+        points: Rest positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
 
     Returns:
         ``(n_cells, d, d)`` array.
@@ -78,7 +94,15 @@ def deformed_shape_matrix(x: np.ndarray, cells: np.ndarray, d: int) -> np.ndarra
 
 
 def cell_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """Element measures ``w = |det D_m| / d!`` (seed eq. (28); area ``|det D_m| / 2`` in 2D)."""
+    """Element measures ``w = |det D_m| / d!`` (seed eq. (28); area ``|det D_m| / 2`` in 2D).
+
+    Args:
+        points: Rest positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
+
+    Returns:
+        ``(n_cells,)`` array.
+    """
     d = points.shape[1]
     return np.abs(np.linalg.det(rest_shape_matrix(points, cells))) / math.factorial(d)
 
@@ -89,6 +113,10 @@ def gradient_operator(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     ``S = [I_d | -1]`` is the selector of eq. (33) restricted to the element's ``d+1`` vertices,
     so ``vec(D_s) = (S x I_d) x_e`` (eq. (32)) and ``vec(F) = (D_m^{-T} x I_d) vec(D_s)``
     (eq. (31)). The element dofs ``x_e`` are ordered as in :func:`cell_dofs`.
+
+    Args:
+        points: Rest positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
 
     Returns:
         ``(n_cells, d*d, (d+1)*d)`` array.
@@ -101,7 +129,12 @@ def gradient_operator(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
 
 
 def deformation_gradient(points: np.ndarray, cells: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Deformation gradients ``F = D_s D_m^{-1}`` (seed eq. (26)), computed as ``vec(F) = G_e x_e``.
+    """Deformation gradients ``F = D_s D_m^{-1}`` (seed eq. (26)), as ``vec(F) = G_e x_e``.
+
+    Args:
+        points: Rest positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
+        x: Deformed positions, a dof vector (vertex-major).
 
     Returns:
         ``(n_cells, d, d)`` array.

@@ -27,6 +27,11 @@ def vertex_masses(points, cells, rho) -> np.ndarray:
     """Lumped vertex masses ``m_i = int rho s_i = sum_t rho_t |t| / (d+1)``, ``(n_vertices,)``.
 
     These are the row sums of the scalar consistent mass matrix.
+
+    Args:
+        points: Rest positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
+        rho: Density (kg/m^3), a scalar or ``(n_cells,)``.
     """
     points, cells = check_mesh(points, cells)
     d = points.shape[1]

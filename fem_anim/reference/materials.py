@@ -46,6 +46,13 @@ def lame_parameters(E, nu) -> tuple:
     ``mu = E / (2 (1 + nu))``, ``lmbda = E nu / ((1 + nu)(1 - 2 nu))``; plane strain (``d`` = 2)
     uses the same values with a 2x2 ``F``.
 
+    Args:
+        E: Young's modulus (Pa).
+        nu: Poisson's ratio.
+
+    Returns:
+        ``(mu, lmbda)`` (Pa).
+
     Raises:
         ValueError: If ``E <= 0`` or ``nu`` is outside ``(-1, 0.5)``.
     """
@@ -70,6 +77,14 @@ def stable_neohookean_parameters(mu, lmbda, d: int) -> tuple:
     i.e. ``mu' = 4/3 mu``, ``lmbda' = lmbda + 5/6 mu`` in 3D and ``mu' = 3/2 mu``,
     ``lmbda' = lmbda + 2/3 mu`` in 2D; ``alpha = 1 + d/(d+1) mu'/lmbda'`` makes ``P(I) = 0`` and
     ``c0 = lmbda'/2 (1 - alpha)^2 - mu'/2 ln(d+1)`` makes ``psi(I) = 0``.
+
+    Args:
+        mu: The shear modulus (Pa).
+        lmbda: The first Lame parameter (Pa).
+        d: The dimension (2 or 3).
+
+    Returns:
+        ``(mu', lmbda', alpha, c0)``.
     """
     mu_ = (d + 1) / d * mu
     lmbda_ = lmbda + mu - 2.0 * mu / (d * (d + 1))

@@ -1,4 +1,4 @@
-"""The mixed (u, p) energy of ``fem_anim/forms/incompressible.py`` on a P1/P1 mesh, in numpy.
+"""The mixed (u, p) energy of :mod:`fem_anim.forms.incompressible` on a P1/P1 mesh, in numpy.
 
 The perturbed Lagrangian (Taylor-Hood in the solver; here both fields are P1, so that every
 integral is exact with the reference's one-point kinematics)
@@ -107,7 +107,18 @@ def _p1_mass(w, d):
 
 
 def mixed_energy(points, cells, model, mu, inv_kappa, x, p, ratio=0.0) -> float:
-    """``Pi(x, p)`` (J); ``x`` deformed positions ``(n_vertices * d,)``, ``p`` ``(n_vertices,)``."""
+    """The perturbed Lagrangian ``Pi(x, p)`` (J).
+
+    Args:
+        points: Rest positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
+        model: ``"neohookean"``, ``"stable_neohookean"`` or ``"mooney_rivlin"``.
+        mu: The shear modulus (Pa).
+        inv_kappa: The compliance ``1/kappa`` (1/Pa).
+        x: Deformed positions ``(n_vertices * d,)``, vertex-major.
+        p: Vertex pressures ``(n_vertices,)`` (Pa).
+        ratio: The Mooney ratio r (Mooney-Rivlin only).
+    """
     points, cells, d, _, _, F, w = _kinematics(points, cells, x)
     (I, II, J), _, _ = _invariant_derivatives(F)
     psi = _partials(model, I, II, J, mu, ratio, d)["psi"]

@@ -1,4 +1,7 @@
-"""Contact barrier against static obstacles, in numpy (the oracle for :mod:`forms.contact`).
+"""Contact barrier against static obstacles, in numpy.
+
+The oracle for :mod:`fem_anim.forms.obstacle_contact` and
+:class:`fem_anim.contact.obstacles.ObstacleContact`.
 
 For P1 the contact energy is integrated with the vertex rule on the boundary facets, so
 
@@ -14,8 +17,8 @@ An obstacle is a dict as in the scene's ``[[obstacle]]`` table: ``type`` ``"plan
 (``point``, ``normal``) or ``"sphere"`` (``center``, ``radius``), with ``dhat`` and
 ``stiffness``. Positions ``x`` are dof vectors, vertex-major (:mod:`.geometry`).
 
-Lagged friction (IPC section 5; :mod:`fem_anim.forms.obstacle_contact`) with the same vertex rule:
-with x_n the positions at the start of the step, p_v = -kappa/d_hat b'(d(x_{n,v})) the
+Lagged friction (IPC section 5; :mod:`fem_anim.forms.obstacle_contact`) with the same vertex
+rule: with x_n the positions at the start of the step, p_v = -kappa/d_hat b'(d(x_{n,v})) the
 frozen pressure, n_v the obstacle's unit normal at x_{n,v} (plane: n; sphere:
 (x_{n,v} - c)/|x_{n,v} - c|), u_v = (I - n_v n_v^T)(x_v - x_{n,v}) and y_v = |u_v|,
 
@@ -24,8 +27,9 @@ frozen pressure, n_v the obstacle's unit normal at x_{n,v} (plane: n; sphere:
 f0(y) = -y^3/(3 eps^2) + y^2/eps + eps/3 and f1(y) = f0'(y) = 2y/eps - y^2/eps^2 below
 eps, f0 = y and f1 = 1 above (so f1(y)/y = 2/eps - y/eps^2 stays finite at y = 0).
 The sphere's Hessian with the curvature term b' Hess d dropped (IPC's projection of the
-negative tangential eigenvalues, :meth:`fem_anim.contact.obstacles.ObstacleContact.curvature_correction`)
-is :func:`contact_hessian` with ``projected=True``.
+negative tangential eigenvalues,
+:meth:`fem_anim.contact.obstacles.ObstacleContact.curvature_correction`) is
+:func:`contact_hessian` with ``projected=True``.
 """
 
 from __future__ import annotations
@@ -42,7 +46,14 @@ __all__ = ["boundary_facets", "vertex_areas", "barrier", "barrier_derivatives",
 
 
 def boundary_facets(cells: np.ndarray) -> np.ndarray:
-    """Facets (sorted vertex tuples) that belong to exactly one simplex, ``(n, d)``."""
+    """Facets that belong to exactly one simplex.
+
+    Args:
+        cells: Simplices, ``(n_cells, d + 1)``.
+
+    Returns:
+        The boundary facets as sorted vertex tuples, ``(n, d)``.
+    """
     k = cells.shape[1]
     faces = np.concatenate([np.delete(cells, i, axis=1) for i in range(k)])
     faces = np.sort(faces, axis=1)
@@ -109,13 +120,20 @@ def _terms(points, cells, x, obstacle):
 
 
 def contact_energy(points, cells, x, obstacle) -> float:
-    """E_c(x) = kappa/d_hat sum_v A_v b(d(x_v)) (J)."""
+    """The contact energy E_c(x) = kappa/d_hat sum_v A_v b(d(x_v)) (J).
+
+    Args:
+        points: Rest positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
+        x: Deformed positions, a dof vector (vertex-major).
+        obstacle: An ``[[obstacle]]`` table (``type``, its geometry, ``dhat``, ``stiffness``).
+    """
     _, d, _, _, scale = _terms(points, cells, x, obstacle)
     return float(np.sum(scale * barrier(d, obstacle["dhat"])))
 
 
 def contact_gradient(points, cells, x, obstacle) -> np.ndarray:
-    """grad E_c, a dof vector."""
+    """grad E_c as a dof vector (arguments as in :func:`contact_energy`)."""
     vertices, d, grad, _, scale = _terms(points, cells, x, obstacle)
     db, _ = barrier_derivatives(d, obstacle["dhat"])
     dim = points.shape[1]
@@ -173,13 +191,25 @@ def _friction_terms(points, cells, x, x_prev, obstacle, eps):
 
 
 def friction_energy(points, cells, x, x_prev, obstacle, eps: float) -> float:
-    """D(x) = mu sum_v A_v p_v f0(|u_v|) (J) for the lagged state ``x_prev``."""
+    """The lagged friction potential D(x) = mu sum_v A_v p_v f0(|u_v|) (J).
+
+    Args:
+        points: Rest positions, ``(n_vertices, d)``.
+        cells: Simplices, ``(n_cells, d + 1)``.
+        x: Deformed positions, a dof vector (vertex-major).
+        x_prev: Positions at the start of the step (the lagged state).
+        obstacle: An ``[[obstacle]]`` table with ``friction`` (mu).
+        eps: The smoothing length eps_v h (m).
+    """
     _, weight, _, f0, _ = _friction_terms(points, cells, x, x_prev, obstacle, eps)
     return float(np.sum(weight * f0))
 
 
 def friction_gradient(points, cells, x, x_prev, obstacle, eps: float) -> np.ndarray:
-    """grad D = mu A_v p_v f1(|u_v|) u_v / |u_v| per boundary vertex, a dof vector."""
+    """grad D = mu A_v p_v f1(|u_v|) u_v / |u_v| per boundary vertex, a dof vector.
+
+    Arguments as in :func:`friction_energy`.
+    """
     vertices, weight, tangential, _, f1_over_y = _friction_terms(points, cells, x, x_prev,
                                                                  obstacle, eps)
     dim = points.shape[1]

@@ -55,25 +55,45 @@ class EnergyProblem:
         return ~self.pinned
 
     def energy(self, x: np.ndarray) -> float:
-        """``E(x) = E_elastic(x) - f_gravity . x``."""
+        """``E(x) = E_elastic(x) - f_gravity . x`` (J).
+
+        Args:
+            x: Deformed positions, a dof vector (vertex-major).
+        """
         elastic = elastic_energy(self.points, self.cells, self.material, self.mu, self.lmbda, x)
         return elastic - float(self.gravity_force @ x)
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
-        """``grad E(x)``, dense ``(n_dofs,)``."""
+        """``grad E(x)``, dense ``(n_dofs,)``.
+
+        Args:
+            x: Deformed positions, a dof vector.
+        """
         elastic = elastic_gradient(self.points, self.cells, self.material, self.mu, self.lmbda, x)
         return elastic - self.gravity_force
 
     def hessian(self, x: np.ndarray) -> sp.csr_matrix:
-        """``hess E(x)`` (gravity is linear, so only the elastic part), sparse CSR."""
+        """``hess E(x)`` (gravity is linear, so only the elastic part), sparse CSR.
+
+        Args:
+            x: Deformed positions, a dof vector.
+        """
         return elastic_hessian(self.points, self.cells, self.material, self.mu, self.lmbda, x)
 
     def force(self, x: np.ndarray) -> np.ndarray:
-        """``f(x) = -grad E(x)``, set to zero on pinned dofs."""
+        """``f(x) = -grad E(x)``, set to zero on pinned dofs.
+
+        Args:
+            x: Deformed positions, a dof vector.
+        """
         return np.where(self.pinned, 0.0, -self.gradient(x))
 
     def accelerate(self, f: np.ndarray) -> np.ndarray:
-        """Constrained acceleration ``a`` with ``M_ff a_f = f_f`` and ``a = 0`` on pinned dofs."""
+        """Constrained acceleration ``a`` with ``M_ff a_f = f_f`` and ``a = 0`` on pinned dofs.
+
+        Args:
+            f: A force, a dof vector.
+        """
         free = self.free
         a = np.zeros_like(f)
         M_ff = self.mass[free][:, free].tocsc()

@@ -45,7 +45,15 @@ def vec(A: np.ndarray) -> np.ndarray:
 
 
 def unvec(v: np.ndarray, d: int) -> np.ndarray:
-    """Inverse of :func:`vec`: ``(n, d*d)`` column-major vectors to ``(n, d, d)`` matrices."""
+    """Inverse of :func:`vec`: column-major vectors to matrices.
+
+    Args:
+        v: ``(n, d*d)`` column-major vectors.
+        d: The matrix size.
+
+    Returns:
+        ``(n, d, d)`` matrices.
+    """
     return v.reshape(-1, d, d).transpose(0, 2, 1)
 
 
@@ -63,13 +71,21 @@ def tensor_to_matrix(T: np.ndarray) -> np.ndarray:
 
 
 def identity_tensor(d: int) -> np.ndarray:
-    """The fourth-order identity ``I[k, a, l, b] = delta_kl delta_ab`` (``dF/dF``)."""
+    """The fourth-order identity ``I[k, a, l, b] = delta_kl delta_ab`` (``dF/dF``).
+
+    Args:
+        d: The dimension.
+    """
     delta = np.eye(d)
     return np.einsum("kl,ab->kalb", delta, delta)
 
 
 def levi_civita(d: int) -> np.ndarray:
-    """The permutation symbol ``epsilon`` with ``d`` indices (``d`` = 2 or 3)."""
+    """The permutation symbol ``epsilon`` with ``d`` indices.
+
+    Args:
+        d: 2 or 3.
+    """
     eps = np.zeros((d,) * d)
     for perm in itertools.permutations(range(d)):
         # sign of a permutation = parity of its inversions
@@ -140,7 +156,14 @@ def signed_svd(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def polar_rotation(F: np.ndarray) -> np.ndarray:
-    """Rotation ``R = U V^T`` of the polar decomposition ``F = R S`` with ``det R = +1``."""
+    """Rotation ``R = U V^T`` of the polar decomposition ``F = R S`` with ``det R = +1``.
+
+    Args:
+        F: ``(n, d, d)`` deformation gradients.
+
+    Returns:
+        ``(n, d, d)`` rotations.
+    """
     U, _, V = signed_svd(F)
     return U @ V.transpose(0, 2, 1)
 

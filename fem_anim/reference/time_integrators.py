@@ -63,7 +63,13 @@ class State:
 
 
 def initial_state(problem: EnergyProblem, x0: np.ndarray, v0: np.ndarray | None = None) -> State:
-    """State at ``t = 0`` with the velocity of pinned dofs set to zero."""
+    """State at ``t = 0`` with the velocity of pinned dofs set to zero.
+
+    Args:
+        problem: The potential energy, mass matrix and pins.
+        x0: Initial positions, a dof vector.
+        v0: Initial velocities (default zero).
+    """
     x0 = np.array(x0, dtype=float)
     v0 = np.zeros_like(x0) if v0 is None else np.array(v0, dtype=float)
     return State(x=x0, v=np.where(problem.pinned, 0.0, v0))

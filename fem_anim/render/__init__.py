@@ -1,5 +1,10 @@
-"""Pictures of a run, made in a separate process that never imports DOLFINx: off-screen frames
-(pyvista), the GIF/MP4 animation, ``final.png`` and the plots of ``stats.csv``.
+"""Render: the pictures of a run, made in a separate process that never imports DOLFINx.
+
+:mod:`~fem_anim.render.process` starts that process; :mod:`~fem_anim.render.animation` reads a
+run directory back and writes the PNG frames, the GIF and MP4 animations and ``final.png``
+with the off-screen pyvista renderer of :mod:`~fem_anim.render.frames`;
+:mod:`~fem_anim.render.plots` draws ``stats.csv`` (energies, Newton and linear iterations).
+Public names load lazily, so importing this package loads neither pyvista nor DOLFINx.
 """
 
 from fem_anim.lazy_exports import lazy_exports

@@ -7,9 +7,9 @@ neither colours nor framing jump between frames, renders every frame with one
 :class:`~fem_anim.render.frames.FrameRenderer` and writes
 
 * ``frames/frame_NNNN.png`` (one per trajectory frame, the rest state first),
-* ``animation.gif`` (Pillow, one palette; at most 50 frames per second, since GIF delays are whole
-  hundredths of a second and viewers slow down shorter ones: faster runs keep every
-  k-th frame),
+* ``animation.gif`` (Pillow, one palette; at most 50 frames per second, since GIF delays
+  are whole hundredths of a second and viewers slow down shorter ones: faster runs keep
+  every k-th frame),
 * ``animation.mp4`` (H.264 through the ffmpeg binary of imageio-ffmpeg),
 * ``final.png`` (the last frame) and the plots of :mod:`fem_anim.render.plots`.
 
@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.errors import FemAnimError
-from fem_anim.render.frames import FrameRenderer, body_labels
 from fem_anim.output.rundir import install, read_manifest
+from fem_anim.render.frames import FrameRenderer, body_labels
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
            "render_directory", "REQUIRED_FILES", "MAX_GIF_FPS"]
@@ -54,7 +54,10 @@ class RunFrames:
 
 
 def check_run_directory(path: Path) -> None:
-    """A directory ``fem-anim run`` finished: exists, and holds :data:`REQUIRED_FILES`.
+    """Check that ``fem-anim run`` finished in a directory: it holds :data:`REQUIRED_FILES`.
+
+    Args:
+        path: The run directory.
 
     Raises:
         FemAnimError: naming the directory and what is missing.
@@ -78,7 +81,13 @@ def check_run_directory(path: Path) -> None:
 
 
 def read_run(path: Path) -> RunFrames:
-    """Read ``trajectory.xdmf`` with meshio; every frame finite.
+    """Read a run's ``trajectory.xdmf`` with meshio and check every frame is finite.
+
+    Args:
+        path: The run directory.
+
+    Returns:
+        The rest mesh and every frame's time, displacement and energy density.
 
     Raises:
         FemAnimError: if the trajectory cannot be read, is empty or holds NaN or inf.
@@ -109,8 +118,14 @@ def read_run(path: Path) -> RunFrames:
 
 
 def frame_values(run: RunFrames, field: str) -> np.ndarray:
-    """The colour field per frame: |u| per vertex (k, n), psi per cell (k, m), or the body
-    number per cell (k, m).
+    """The colour field of every frame.
+
+    Args:
+        run: The trajectory.
+        field: ``render.color_by``: ``"displacement"``, ``"energy_density"`` or ``"body"``.
+
+    Returns:
+        |u| per vertex (k, n), psi per cell (k, m), or the body number per cell (k, m).
 
     Raises:
         FemAnimError: if the run has no energy density (written by an older fem-anim).
@@ -126,7 +141,14 @@ def frame_values(run: RunFrames, field: str) -> np.ndarray:
 
 
 def gif_stride(fps: float) -> int:
-    """Keep every k-th frame in the GIF so that it plays at most :data:`MAX_GIF_FPS`."""
+    """How many frames to advance per GIF frame so that it plays at most :data:`MAX_GIF_FPS`.
+
+    Args:
+        fps: The animation's frame rate.
+
+    Returns:
+        The stride k >= 1 (the GIF keeps every k-th frame).
+    """
     return max(1, math.ceil(fps / MAX_GIF_FPS - 1e-9))
 
 
@@ -146,7 +168,11 @@ def _even(image: np.ndarray) -> np.ndarray:
 
 
 def render_directory(path: Path, settings: dict) -> dict:
-    """Render the run in ``path`` as configured by ``settings`` (the ``[render]`` table).
+    """Render the run in a directory: frames, animations, ``final.png`` and the plots.
+
+    Args:
+        path: The finished run directory.
+        settings: The scene's ``[render]`` table.
 
     Returns:
         What was made: ``frames`` rendered, ``seconds_per_frame``, ``fps``, ``gif_frames``.

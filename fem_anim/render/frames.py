@@ -6,8 +6,8 @@ from the scene's ``[render]`` table) and renders frame after frame into it, so t
 and the colours stay fixed over an animation (:mod:`fem_anim.render.animation`);
 :func:`render_frame` and :func:`render_vtu` make one picture of one state.
 
-Only the rendering process imports this module (:mod:`fem_anim.render.process`): the VTK wheel's
-C++ runtime clashes with libraries DOLFINx loads.
+Only the rendering process imports this module (:mod:`fem_anim.render.process`): the VTK
+wheel's C++ runtime clashes with libraries DOLFINx loads.
 """
 
 from __future__ import annotations
@@ -136,8 +136,16 @@ class FrameRenderer:
         self.plotter.renderer.ResetCamera(*bounds)  # keeps the direction, fits the box
 
     def render(self, displacement: np.ndarray, values: np.ndarray, title: str = "") -> np.ndarray:
-        """The image (height, width, 3) of the mesh moved by ``displacement``, coloured by
-        ``values`` (per vertex for displacement, per cell for energy density)."""
+        """Render the mesh in one state.
+
+        Args:
+            displacement: Vertex displacements (n, 2 or 3).
+            values: The colour field: per vertex for displacement, per cell otherwise.
+            title: Text drawn in the top-left corner.
+
+        Returns:
+            The image, (height, width, 3) uint8.
+        """
         self.grid.points = self._rest + _pad3(displacement)
         self.values[:] = values
         self.grid.Modified()
@@ -146,12 +154,22 @@ class FrameRenderer:
         return self.plotter.screenshot(return_img=True)
 
     def close(self) -> None:
+        """Release the plotter and its render window."""
         self.plotter.close()
 
 
 def body_labels(cells: np.ndarray) -> np.ndarray:
-    """The connected part of the mesh each cell belongs to, numbered by first cell: the
-    bodies of a ``[[body]]`` scene in their order (their cells are concatenated)."""
+    """The connected part of the mesh each cell belongs to, numbered by first cell.
+
+    For a ``[[body]]`` scene these are the bodies in their order (their cells are
+    concatenated).
+
+    Args:
+        cells: Simplices (m, 3 or 4).
+
+    Returns:
+        The part number of each cell, (m,) float (a colour field).
+    """
     return cell_components(cells, int(cells.max()) + 1).astype(float)
 
 
@@ -204,8 +222,15 @@ def render_frame(path: Path, points: np.ndarray, cells: np.ndarray, displacement
 
 
 def render_vtu(vtu: Path, png: Path, title: str = "", settings: dict | None = None) -> None:
-    """Render a ``final.vtu``-style file (point data ``displacement``, cell data
-    ``energy_density``) to a PNG."""
+    """Render a ``final.vtu``-style file to a PNG.
+
+    Args:
+        vtu: A mesh file with point data ``displacement`` (and cell data
+            ``energy_density``, to colour by it).
+        png: The PNG file to write.
+        title: Text drawn in the top-left corner.
+        settings: The scene's ``[render]`` table (default: its defaults).
+    """
     import meshio
 
     m = meshio.read(vtu)

@@ -1,8 +1,8 @@
 """Plots of a run's ``stats.csv`` (matplotlib, Agg backend): energies and solver effort.
 
 * ``energies.png``: kinetic, elastic, gravitational and total energy over time. The total
-  is what the integrator conserves or dissipates (seed section 3: implicit Euler loses
-  energy, Newmark keeps it up to the Newton tolerance).
+  is what the integrator conserves or dissipates (implicit Euler loses energy; implicit
+  Newmark, seed section 3.1 eq. 1, keeps it up to the Newton tolerance).
 * ``newton.png``: Newton iterations (top) and linear solver iterations (bottom) per
   accepted step; steps that needed retries with a smaller dt are marked, and substeps
   (dt smaller than the frame step) drawn in another colour.
@@ -19,13 +19,20 @@ from fem_anim.errors import FemAnimError
 
 __all__ = ["read_stats", "write_plots", "PLOT_COLUMNS"]
 
-#: The ``stats.csv`` columns the plots use (fem_anim.output.files.STATS_COLUMNS has them all).
+#: The ``stats.csv`` columns the plots use (:data:`fem_anim.output.files.STATS_COLUMNS`
+#: has them all).
 PLOT_COLUMNS = ("step", "time", "dt", "retries", "newton_its", "linear_its", "kinetic",
                 "elastic", "gravity", "total_energy")
 
 
 def read_stats(path: Path) -> dict[str, np.ndarray]:
     """The plotted columns of ``stats.csv`` as float arrays.
+
+    Args:
+        path: The ``stats.csv`` file.
+
+    Returns:
+        :data:`PLOT_COLUMNS` name -> one value per row.
 
     Raises:
         FemAnimError: if the file is missing a column, has no rows or a non-number.
@@ -47,7 +54,19 @@ def read_stats(path: Path) -> dict[str, np.ndarray]:
 
 
 def write_plots(stats_csv: Path, directory: Path, dpi: int = 100) -> list[Path]:
-    """Write ``energies.png`` and ``newton.png`` into ``directory``; return their paths."""
+    """Plot a run's statistics.
+
+    Args:
+        stats_csv: The run's ``stats.csv``.
+        directory: Where to write ``energies.png`` and ``newton.png``.
+        dpi: Resolution of the PNG files.
+
+    Returns:
+        The paths of the two files.
+
+    Raises:
+        FemAnimError: if ``stats_csv`` lacks a column or holds a non-number.
+    """
     import matplotlib
 
     matplotlib.use("Agg")

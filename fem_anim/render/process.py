@@ -1,9 +1,9 @@
 """Rendering in its own process: a run's pictures, or one file's.
 
 :func:`render_run` (frames, GIF, MP4, final.png and plots of a run directory:
-:func:`fem_anim.render.animation.render_directory`) and :func:`render_file` (one ``.vtu`` to a
-PNG: :func:`fem_anim.render.frames.render_vtu`) start ``python -m fem_anim.render.process``: the
-VTK wheel's C++ runtime clashes with libraries DOLFINx loads (std::regex in VTK's scalar
+:func:`fem_anim.render.animation.render_directory`) and :func:`render_file` (one ``.vtu`` to
+a PNG: :func:`fem_anim.render.frames.render_vtu`) start ``python -m fem_anim.render.process``:
+the VTK wheel's C++ runtime clashes with libraries DOLFINx loads (std::regex in VTK's scalar
 bar aborts in a process that has imported dolfinx), and a separate process also lets a
 saved run be re-rendered without simulating again (``fem-anim render OUTDIR``).
 """
@@ -17,15 +17,15 @@ import subprocess
 import sys
 from pathlib import Path
 
-from fem_anim.render.animation import render_directory
 from fem_anim.errors import FemAnimError
+from fem_anim.render.animation import render_directory
 from fem_anim.render.frames import render_vtu
 
 __all__ = ["render_file", "render_run"]
 
 
 def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
-    """``python -m fem_anim.render.process ARGS`` outside the MPI job (see the module docstring).
+    """Run ``python -m fem_anim.render.process ARGS`` outside the MPI job.
 
     Raises:
         FemAnimError: the renderer's one-line message, if it rejected its input (exit 2).
@@ -46,7 +46,18 @@ def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
 
 
 def render_file(vtu: Path, png: Path, title: str = "", settings: dict | None = None) -> None:
-    """Render ``vtu`` to ``png`` in a fresh Python process."""
+    """Render a ``.vtu`` file to a PNG in a fresh Python process.
+
+    Args:
+        vtu: A mesh file with point data ``displacement``.
+        png: The PNG file to write.
+        title: Text drawn in the top-left corner.
+        settings: The scene's ``[render]`` table (default: its defaults).
+
+    Raises:
+        FemAnimError: the renderer's one-line message, if it rejected its input.
+        RuntimeError: if rendering failed otherwise or wrote no file.
+    """
     _run_renderer([str(vtu), str(png), "--title", title,
                    "--settings", json.dumps(settings or {})])
     if not Path(png).is_file():
@@ -54,8 +65,14 @@ def render_file(vtu: Path, png: Path, title: str = "", settings: dict | None = N
 
 
 def render_run(path: Path, settings: dict, quiet: bool = True) -> None:
-    """Pictures of the run in ``path`` (frames, GIF, MP4, final.png, plots), in a fresh
-    Python process (:func:`fem_anim.render.animation.render_directory`).
+    """Make the pictures of a run (frames, GIF, MP4, final.png, plots) in a fresh process.
+
+    See :func:`fem_anim.render.animation.render_directory`.
+
+    Args:
+        path: The finished run directory.
+        settings: The scene's ``[render]`` table.
+        quiet: Do not print the renderer's summary line.
 
     Raises:
         FemAnimError: naming what is missing or wrong in ``path``.
@@ -67,7 +84,14 @@ def render_run(path: Path, settings: dict, quiet: bool = True) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m fem_anim.render.process VTU PNG`` or ``python -m fem_anim.render.process --run OUTDIR``."""
+    """The render process: ``VTU PNG`` (one file) or ``--run OUTDIR`` (a run directory).
+
+    Args:
+        argv: The command line after the program name (default: ``sys.argv[1:]``).
+
+    Returns:
+        The exit status: 0, or 2 with a one-line ``fem-anim: error:`` message on stderr.
+    """
     parser = argparse.ArgumentParser(prog="python -m fem_anim.render.process")
     parser.add_argument("files", nargs="*", metavar="VTU PNG")
     parser.add_argument("--run", metavar="OUTDIR", help="render a run directory")

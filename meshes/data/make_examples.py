@@ -21,7 +21,11 @@ HERE = Path(__file__).resolve().parent
 
 
 def cube_surface(edge: float) -> tuple[np.ndarray, np.ndarray]:
-    """The 8 corners of ``[0, edge]^3`` and 12 outward-oriented triangles."""
+    """The 8 corners of ``[0, edge]^3`` and 12 outward-oriented triangles.
+
+    Args:
+        edge: The cube's edge length (m).
+    """
     points = edge * np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
     quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
     triangles = np.array([[a, b, c] for a, b, c, d in quads] + [[a, c, d] for a, b, c, d in quads])
@@ -29,7 +33,12 @@ def cube_surface(edge: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def icosphere(radius: float, subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
-    """Points and outward-oriented triangles of a subdivided icosahedron on a sphere."""
+    """Points and outward-oriented triangles of a subdivided icosahedron on a sphere.
+
+    Args:
+        radius: The sphere's radius (m), centred at the origin.
+        subdivisions: How many times each triangle is split into four.
+    """
     t = (1.0 + 5.0**0.5) / 2.0
     points = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
                        [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]])
@@ -51,6 +60,11 @@ def icosphere(radius: float, subdivisions: int) -> tuple[np.ndarray, np.ndarray]
 
 
 def write_two_region_box(path: Path) -> None:
+    """Mesh the two-region box with gmsh and write it (gmsh 4.1 ASCII).
+
+    Args:
+        path: The ``.msh`` file to write.
+    """
     gmsh.initialize()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -73,6 +87,7 @@ def write_two_region_box(path: Path) -> None:
 
 
 def main() -> None:
+    """Write the three example meshes into this folder."""
     for name, (points, triangles) in (("cube.stl", cube_surface(0.2)),
                                       ("icosphere.stl", icosphere(0.1, 2))):
         meshio.write(HERE / name, meshio.Mesh(points, [("triangle", triangles)]), binary=True)

@@ -2,7 +2,7 @@
 
 Usage (``tests/test_reference_mpi.py`` runs it)::
 
-    mpirun -n 2 python tests/mpi_reference_check.py [--full]
+    mpirun -n 2 python tests/mpi/mpi_reference_check.py [--full]
 
 The parallel counterpart of ``tests/test_reference_comparison.py``: rank 0 makes the meshes
 with :func:`fem_anim.reference.box_mesh`, :func:`fem_anim.mesh.build.mesh_from_arrays` distributes
@@ -49,7 +49,7 @@ from fem_anim.output.files import VertexGather
 from fem_anim.problem.objective import EnergyProblem
 from fem_anim.simulation.loop import Simulation
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from test_reference_comparison import (  # noqa: E402 (the serial test's beam scenes)
     DENSITY, DT, GRAVITY, LENGTHS, PIN_MAX, PIN_MIN, POISSON_RATIO, YOUNGS_MODULUS,
     write_scene)

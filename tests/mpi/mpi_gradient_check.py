@@ -2,7 +2,7 @@
 
 Usage (``tests/test_mpi_gradient.py`` runs it)::
 
-    mpirun -n 2 python tests/mpi_gradient_check.py
+    mpirun -n 2 python tests/mpi/mpi_gradient_check.py
 
 A cube crushed by a moving press (``fem_anim.bench.hard``'s StVK cube): at the initial guess of
 its first two steps, r . d of the residual callback (``EnergyProblem.residual``: the assembled

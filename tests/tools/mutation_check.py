@@ -21,9 +21,9 @@ every selected test exists, so the list cannot rot silently when the code change
 
 Usage::
 
-    .venv/bin/python tests/mutation_check.py             # all mutations, with baselines
-    .venv/bin/python tests/mutation_check.py --list      # names and selections
-    .venv/bin/python tests/mutation_check.py --only friction-pressure-dhat sphere-curvature-sign
+    .venv/bin/python tests/tools/mutation_check.py             # all mutations, with baselines
+    .venv/bin/python tests/tools/mutation_check.py --list      # names and selections
+    .venv/bin/python tests/tools/mutation_check.py --only friction-pressure-dhat  # one
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 __all__ = ["Mutation", "MUTATIONS", "ROOT", "copy_tree", "main"]
 
@@ -71,7 +71,7 @@ REF = "tests/test_reference_comparison.py"
 MODES = "tests/test_hessian_modes.py"
 
 MUTATIONS: list[Mutation] = [
-    # -- the six bugs of issue 19 ------------------------------------------------------------
+    # -- six bugs the independent checks were written to catch --------------------------------
     Mutation("friction-pressure-dhat", "forms/obstacle_contact.py",
              "- (d - dhat) ** 2 / d, 0.0)", "- (d - dhat) ** 2 / dhat, 0.0)",
              (f"{IND}::test_friction_matches_reference",),
@@ -223,7 +223,7 @@ MUTATIONS: list[Mutation] = [
              "return -y ** 3 / (3.0 * eps ** 2) + y ** 2 / eps + eps / 2.0",
              (f"{IND}::test_reference_friction_gradient_by_finite_differences",),
              "reference f0 discontinuous at eps"),
-    # -- extremes: expectations derived from the scene (issue 19 point 4) --------------------
+    # -- extremes: expectations derived from the scene ---------------------------------------
     Mutation("extremes-pin-sign", "fem_anim/bench/extreme_cases.py",
              "    return v * (t if until is None else min(t, until))",
              "    return -v * (t if until is None else min(t, until))",
@@ -387,7 +387,8 @@ def verify_isolation(scratch: Path) -> None:
         raise SystemExit("mutation_check: a broken fem_anim in the scratch copy still imports; "
                          "the tests would not see the mutations")
     where = subprocess.run(
-        [sys.executable, "-c", "import fem_anim, fem_anim.forms.obstacle_contact as c, fem_anim.solver.minimiser as s;"
+        [sys.executable, "-c",
+         "import fem_anim, fem_anim.forms.obstacle_contact as c, fem_anim.solver.minimiser as s;"
          "print(fem_anim.__file__); print(c.__file__); print(s.__file__)"],
         cwd=scratch, env=environment(scratch), capture_output=True, text=True, check=True)
     for line in where.stdout.split():

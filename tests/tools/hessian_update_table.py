@@ -1,8 +1,9 @@
-"""README's table of ``solver.hessian_update`` and the budget, side by side in one process.
+"""A table of ``solver.hessian_update`` and the budget options, side by side in one process.
 
 Usage (from the repository's top; the default scene unless a scene file is given)::
 
-    .venv/bin/python tests/hessian_update_table.py [SCENE.toml] [--steps N] [--set KEY=VALUE ...]
+    .venv/bin/python tests/tools/hessian_update_table.py [SCENE.toml] [--steps N]
+    .venv/bin/python tests/tools/hessian_update_table.py --set KEY=VALUE [--set ...]
 
 Runs the scene once per option below, in this order, each with a fresh
 :class:`~fem_anim.simulation.loop.Simulation` (forms from FFCx's disk cache after the first), and

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from test_solver_menu import squash  # noqa: E402
 
 comm = MPI.COMM_WORLD
