@@ -5,30 +5,32 @@ and 0.9.0 (Debian 13: UFL 2024.2, FFCx/basix 0.9, PETSc 3.22). Every name that d
 between them is wrapped here, in the package and in the tests alike
 (``tests/test_compat_seam.py`` fails when one appears elsewhere):
 
-==========================================  ==================================================
-0.5.2                                       0.9.0
-==========================================  ==================================================
-``fem.VectorFunctionSpace(mesh, el)``       ``fem.functionspace(mesh, ("Lagrange", k, (d,)))``
-``fem.FunctionSpace(mesh, ("DG", 0))``      ``fem.functionspace(mesh, ("DG", 0))``
-``ufl.TensorElement("Quadrature", ...)``    ``basix.ufl.quadrature_element(cell, shape, ...)``
-``ufl.Mesh(ufl.VectorElement(...))``        ``basix.ufl.element("Lagrange", cell, 1, shape)``
-``ufl.MixedElement([...])``                 ``basix.ufl.mixed_element([...])``
-``PC.SchurPreType``                         ``PC.FieldSplitSchurPreType`` (petsc4py)
-``KSP...CONVERGED_CG_NEG_CURVE`` (5),        ``CONVERGED_NEG_CURVE`` (5),
-``CONVERGED_CG_CONSTRAINED`` (6)            ``CONVERGED_STEP_LENGTH`` (6) (petsc4py)
-``u.vector``                                ``u.x.petsc_vec``
-``geometry.dofmap`` / ``dofmap.list``       2D arrays (0.5: adjacency lists)
-``geometry.BoundingBoxTree(mesh, d)``       ``geometry.bb_tree(mesh, d)``
-``compute_collisions(tree, x)``             ``compute_collisions_points(tree, x)``
-``Expression(e, X, jit_params=)``           ``Expression(e, X, jit_options=)``
-``Expression.eval(cells)``                  ``Expression.eval(mesh, cells)``
-``basix.cell.string_to_type``               ``basix.CellType[name]``
-``make_quadrature(rule, cell, degree)``     ``make_quadrature(cell, degree, rule=...)``
-``ffcx.get_parameters``, ``parameters=``    ``ffcx.get_options``, ``options=``
-``fem.FormMetaClass(ufcx, V, w, c, ...)``   ``form_cpp_class(dtype)(ptr, V, w, c, ...)``; ``Form``
-``ufcx_form.original_coefficient_position`` ``original_coefficient_positions``
-``set_bc(scale=)``, ``apply_lifting(...)``  ``alpha=`` (fem_anim passes them by position)
-==========================================  ==================================================
+::
+
+    ==========================================  ==================================================
+    0.5.2                                       0.9.0
+    ==========================================  ==================================================
+    ``fem.VectorFunctionSpace(mesh, el)``       ``fem.functionspace(mesh, ("Lagrange", k, (d,)))``
+    ``fem.FunctionSpace(mesh, ("DG", 0))``      ``fem.functionspace(mesh, ("DG", 0))``
+    ``ufl.TensorElement("Quadrature", ...)``    ``basix.ufl.quadrature_element(cell, shape, ...)``
+    ``ufl.Mesh(ufl.VectorElement(...))``        ``basix.ufl.element("Lagrange", cell, 1, shape)``
+    ``ufl.MixedElement([...])``                 ``basix.ufl.mixed_element([...])``
+    ``PC.SchurPreType``                         ``PC.FieldSplitSchurPreType`` (petsc4py)
+    ``KSP...CONVERGED_CG_NEG_CURVE`` (5),        ``CONVERGED_NEG_CURVE`` (5),
+    ``CONVERGED_CG_CONSTRAINED`` (6)            ``CONVERGED_STEP_LENGTH`` (6) (petsc4py)
+    ``u.vector``                                ``u.x.petsc_vec``
+    ``geometry.dofmap`` / ``dofmap.list``       2D arrays (0.5: adjacency lists)
+    ``geometry.BoundingBoxTree(mesh, d)``       ``geometry.bb_tree(mesh, d)``
+    ``compute_collisions(tree, x)``             ``compute_collisions_points(tree, x)``
+    ``Expression(e, X, jit_params=)``           ``Expression(e, X, jit_options=)``
+    ``Expression.eval(cells)``                  ``Expression.eval(mesh, cells)``
+    ``basix.cell.string_to_type``               ``basix.CellType[name]``
+    ``make_quadrature(rule, cell, degree)``     ``make_quadrature(cell, degree, rule=...)``
+    ``ffcx.get_parameters``, ``parameters=``    ``ffcx.get_options``, ``options=``
+    ``fem.FormMetaClass(ufcx, V, w, c, ...)``   ``form_cpp_class(dtype)(ptr, V, w, c, ...)``; ``Form``
+    ``ufcx_form.original_coefficient_position`` ``original_coefficient_positions``
+    ``set_bc(scale=)``, ``apply_lifting(...)``  ``alpha=`` (fem_anim passes them by position)
+    ==========================================  ==================================================
 
 Each function below branches on :data:`LEGACY` (0.5) against the current API (0.9). A newer
 release is one more branch in the functions whose names it changes; DOLFINx 0.10, for

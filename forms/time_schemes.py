@@ -9,15 +9,17 @@ condition M (x - y) + w grad E(x) = 0 is the scheme. Here E = elastic + gravitat
 potential. The table below gives y, w and the velocity update for each scheme
 (h the time step, f = -grad E, a = M^-1 f):
 
-================  =================================================  ======  =================
-scheme            y                                                  w       v_{n+1}
-================  =================================================  ======  =================
-newmark           x_n + h v_n + h^2/4 a_n  (seed eqs. 1-3)            h^2/4   v_n + h/2 (a_n +
-                                                                             a_{n+1})
-implicit_euler    x_n + h v_n                                         h^2     (x - x_n)/h
-bdf2              4/3 x_n - 1/3 x_{n-1} + 8h/9 v_n - 2h/9 v_{n-1}     4h^2/9  3/(2h) (x - x^)
-symplectic_euler  x_n + h v_n, E linearised at x_n (explicit)         h^2     (x - x_n)/h
-================  =================================================  ======  =================
+::
+
+    ================  =================================================  ======  =================
+    scheme            y                                                  w       v_{n+1}
+    ================  =================================================  ======  =================
+    newmark           x_n + h v_n + h^2/4 a_n  (seed eqs. 1-3)            h^2/4   v_n + h/2 (a_n +
+                                                                                 a_{n+1})
+    implicit_euler    x_n + h v_n                                         h^2     (x - x_n)/h
+    bdf2              4/3 x_n - 1/3 x_{n-1} + 8h/9 v_n - 2h/9 v_{n-1}     4h^2/9  3/(2h) (x - x^)
+    symplectic_euler  x_n + h v_n, E linearised at x_n (explicit)         h^2     (x - x_n)/h
+    ================  =================================================  ======  =================
 
 with x^ = 4/3 x_n - 1/3 x_{n-1}. For Newmark a_{n+1} = (x - y)/w follows from stationarity.
 Newmark (the trapezoidal rule) is second order and conserves the energy of linear systems;

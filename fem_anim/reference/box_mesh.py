@@ -12,7 +12,7 @@ __all__ = ["box_mesh"]
 def box_mesh(
     divisions: tuple[int, ...], lengths: tuple[float, ...] | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Kuhn (Freudenthal) triangulation of the box ``[0, L_0] x ... x [0, L_{d-1}]``.
+    """Kuhn (Freudenthal) triangulation of the box ``[0, L_0] x (...) x [0, L_{d-1}]``.
 
     Each of the ``prod(divisions)`` grid cells is split into ``d!`` simplices (2 triangles in
     2D, 6 tetrahedra in 3D) sharing the cell's main diagonal; the simplex of permutation ``pi``

@@ -68,7 +68,7 @@ def mass_matrix(points, cells, rho, lumped: bool = False) -> sp.csr_matrix:
 
 
 def gravity_energy(points, cells, rho, g, x: np.ndarray) -> float:
-    """Gravity potential ``-int rho g . x dV = -sum_i m_i g . x_i``.
+    """Gravity potential ``-int rho dot(g, x) dV``, which is ``-sum_i m_i dot(g, x_i)`` for P1.
 
     Exact for P1 positions, where it equals ``-(M (1 x g)) . x`` with either mass matrix.
 

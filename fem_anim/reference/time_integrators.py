@@ -7,13 +7,15 @@ Each implicit step minimises the step objective (seed eq. (4))
 whose stationarity ``M (x - y) = c f(x)`` is the integrator's update; ``y`` (the inertial
 predictor) and ``c`` depend on the scheme:
 
-==================  ===============================================  ==========
-scheme              y                                                c
-==================  ===============================================  ==========
-Newmark (trap.)     x_n + h v_n + h^2/4 a_n           (eqs. (1)-(3))  h^2/4
-implicit Euler      x_n + h v_n                                       h^2
-BDF2                4/3 x_n - 1/3 x_{n-1} + 8h/9 v_n - 2h/9 v_{n-1}   4h^2/9
-==================  ===============================================  ==========
+::
+
+    ==================  ===============================================  ==========
+    scheme              y                                                c
+    ==================  ===============================================  ==========
+    Newmark (trap.)     x_n + h v_n + h^2/4 a_n           (eqs. (1)-(3))  h^2/4
+    implicit Euler      x_n + h v_n                                       h^2
+    BDF2                4/3 x_n - 1/3 x_{n-1} + 8h/9 v_n - 2h/9 v_{n-1}   4h^2/9
+    ==================  ===============================================  ==========
 
 followed by the velocity (and acceleration) updates in the step functions. Symplectic Euler
 is the explicit baseline. Pinned dofs keep their position, with zero velocity and
