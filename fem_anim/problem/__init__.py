@@ -4,7 +4,8 @@ and obstacle contact into one energy whose gradient and Hessian are taken by
 ``ufl.derivative``, and stages it each step. Its parts: the spaces, functions and measures
 (``discretisation``), the UFL terms (``energy_terms``), the filtered Hessian
 (``tangent_filter``), the pins (``pins``) and animated handles (``handles``), the matrices
-(``matrices``), the form compiler (``form_compiler``); beside it the per-point quadrature
+(``matrices``), the reported energies (``reported_energies``), the form compiler
+(``form_compiler``) and the assembly's log events (``events``); beside it the per-point quadrature
 data (``quadrature``), the terms assembled once (``constant_terms``) and the mixed (u, p)
 unknown (``mixed_space``).
 """
@@ -20,7 +21,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "PinMotion": "handles",
     "MixedFields": "mixed_space",
     "SchurPreconditioner": "mixed_space",
-    "EVENTS": "objective",
+    "EVENTS": "events",
     "EnergyProblem": "objective",
     "QuadratureData": "quadrature",
     "FILTERED_MODES": "tangent_filter",

@@ -37,27 +37,24 @@ from petsc4py import PETSc
 
 from fem_anim import compat
 from fem_anim.contact.ipc import IPCContact
-from fem_anim.mesh.build import SimplexMesh, cell_volumes
+from fem_anim.mesh.build import SimplexMesh
 from fem_anim.mesh.regions import local_cell_markers
 from fem_anim.problem.constant_terms import ConstantTerms, QuadraticTerm
 from fem_anim.problem.discretisation import Discretisation
 from fem_anim.problem.energy_terms import EnergyTerms
+from fem_anim.problem.events import EVENTS
 from fem_anim.problem.form_compiler import compile_forms
 from fem_anim.problem.matrices import Matrices
 from fem_anim.problem.mixed_space import SchurPreconditioner
 from fem_anim.problem.pins import Pins
+from fem_anim.problem.reported_energies import ReportedEnergies
 from fem_anim.problem.tangent_filter import ONLY_FILTERED, TangentFilter
 
-__all__ = ["EVENTS", "EnergyProblem"]
-
-#: PETSc log events of the assembly callbacks (PETSc's own timers: ``-log_view`` lists them,
-#: and :mod:`fem_anim.bench.perf` reads them to split a step's time).
-EVENTS = {name: PETSc.Log.Event(f"FemAnim{name.capitalize()}")
-          for name in ("objective", "residual", "jacobian", "filter", "energies")}
-
+__all__ = ["EnergyProblem"]
 
 @dataclass
-class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices):
+class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
+                    ReportedEnergies):
     """Forms, functions and assembly callbacks of one scene's step objective.
 
     Building one is collective (it compiles the forms and locates the pins).
@@ -343,43 +340,3 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices):
             self.schur.update(float(self.weight.value))
         EVENTS["jacobian"].end()
         self.assembly_s += time.perf_counter() - start
-
-    # -- reported energies ----------------------------------------------------------------
-    def energies(self) -> dict[str, float]:
-        """Kinetic, elastic, gravitational and contact energy (J) of the current (u, v)
-        state and their sum ``total_energy`` (collective)."""
-        EVENTS["energies"].begin()
-        self.update_quadrature_data()
-        values = {name: self.assemble_scalar(form) for name, form in self.energy_forms.items()}
-        EVENTS["energies"].end()
-        values.setdefault("gravity", 0.0)
-        values.setdefault("contact", 0.0)
-        if self.ipc is not None:
-            values["contact"] += self.ipc.energy(friction=False)  # stored, not dissipated
-        values["total_energy"] = values["kinetic"] + values["elastic"] + values["gravity"] + \
-            values["contact"]
-        return values
-
-    def cell_energy_density(self, u: np.ndarray) -> np.ndarray:
-        """Mean strain energy density of each owned cell, 1/|K| int_K psi(F(u)) dX (J/m^3).
-
-        The DG0 projection of the material's psi (seed section 4.4), integrated with the
-        elastic quadrature rule, so sum_K |K| psi_K is the elastic energy exactly. Owned
-        cells in local order; local work only (each cell's integral is complete on its
-        owner), but the caller gathers collectively.
-
-        Args:
-            u: Displacement dof values, ghosts included (a :class:`State`'s ``u``).
-        """
-        self.u.x.array[:] = u
-        self.update_quadrature_data()
-        num_owned = self.domain.mesh.topology.index_map(self.d).size_local
-        cell_dofs = compat.cell_dofs(self.W0)[:num_owned, 0]
-        if self._cell_volumes is None:
-            mesh = self.domain.mesh
-            self._cell_volumes = np.abs(cell_volumes(
-                mesh.geometry.x[:, : self.d], compat.geometry_dofmap(mesh)[:num_owned]))
-        energy = fem_petsc.assemble_vector(self.cell_elastic_form)
-        values = energy.array[cell_dofs] / self._cell_volumes
-        energy.destroy()
-        return values
