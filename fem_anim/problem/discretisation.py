@@ -4,7 +4,7 @@ material constants and the integration measures.
 The unknown is the displacement u = x - X (x deformed, X rest positions) in the vector P_k
 space V, or, with ``element.formulation = "mixed"`` (:mod:`fem_anim.problem.mixed_space`),
 w = (u, p / mu) in the Taylor-Hood space P2 x P1, whose u and p are copied into the
-displacement Functions :attr:`u` and :attr:`p`. The elastic term is integrated at the
+displacement Functions ``u`` and ``p``. The elastic term is integrated at the
 scene's ``element.quadrature_degree``, by default :func:`default_quadrature_degree`, raised
 for the mixed formulation to 1 + d (k - 1) so that int q (J - 1) dX is exact (the total
 volume is then kept up to the solver tolerance). The inertia term uses the consistent or the

@@ -129,7 +129,7 @@ class EnergyTerms:
         Returns:
             The first forms to compile: the damping force (damped scenes) and, for the
             filtered Hessian modes, y^T H y; ``"assembled"``, ``"residual"`` and
-            ``"jacobian"`` are returned for :meth:`_report_forms` to place.
+            ``"jacobian"`` are returned for ``_report_forms`` to place.
         """
         scene, d = self.scene, self.d
         unknown = terms.unknown = self.fields.w if self.mixed else self.u

@@ -115,5 +115,6 @@ class SchurPreconditioner:
         compat.set_schur_user_matrix(pc, self.matrix)
 
     def destroy(self) -> None:
+        """Free the PETSc matrices and index sets."""
         for obj in (self.mass, self.matrix, self.is_u, self.is_p):
             obj.destroy()

@@ -207,7 +207,7 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
             v: The new velocity; with ``pin_rates`` its pinned entries are overwritten.
             a: The new acceleration (m/s^2); likewise.
             pin_rates: Put the animated pins' exact rates at ``t`` into ``v`` and ``a``
-                (:meth:`prescribe_pin_rates`).
+                (:meth:`~fem_anim.problem.pins.Pins.prescribe_pin_rates`).
         """
         if self.ipc is not None:
             self.ipc.finish_step()
@@ -319,7 +319,8 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
 
     def jacobian(self, snes, x: PETSc.Vec, A: PETSc.Mat, P: PETSc.Mat) -> None:
         """Hessian of g at x into ``A`` (exact, or with the elastic part filtered:
-        ``solver.hessian``, :meth:`set_hessian_filter`; collective).
+        ``solver.hessian``,
+        :meth:`~fem_anim.problem.tangent_filter.TangentFilter.set_hessian_filter`; collective).
 
         Line-search trials may have left another state in u, so x is set first.
         """

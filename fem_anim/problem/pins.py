@@ -27,13 +27,13 @@ __all__ = ["Pins"]
 class Pins:
     """Locating the pinned nodes, moving the handles, and their prescribed rates."""
 
-    #: The animated pins (``velocity`` or ``angular_velocity`` given), set by :meth:`_pins`.
+    #: The animated pins (``velocity`` or ``angular_velocity`` given), set by ``_pins``.
     moving_pins: list[PinMotion]
 
     def _pins(self) -> list:
         """One ``dirichletbc`` on V per pin, holding ``u_bc`` on its nodes (collective).
 
-        Also sets :attr:`moving_pins` and the nodes of each pin (``_pin_dofs``).
+        Also sets ``moving_pins`` and the nodes of each pin (``_pin_dofs``).
 
         Raises:
             SceneError: a pin's box holds no mesh vertex (of its body, for a body's pin).

@@ -44,7 +44,8 @@ class ReportedEnergies:
         owner), but the caller gathers collectively.
 
         Args:
-            u: Displacement dof values, ghosts included (a :class:`State`'s ``u``).
+            u: Displacement dof values (m), ghosts included (a
+                :class:`~fem_anim.simulation.integrators.State`'s ``u``).
         """
         self.u.x.array[:] = u
         self.update_quadrature_data()

@@ -51,6 +51,7 @@ class Integrator:
 
     @property
     def name(self) -> str:
+        """The scheme's name (``time.integrator``)."""
         return self.scheme.name
 
     def weight(self, h: float, state: State) -> float:

@@ -130,6 +130,7 @@ def _loop(sim, h, steps, every, run_dir, quiet, resume, interrupts) -> RunResult
                          run_dir.file("stats.csv"), sim.comm, rows)
 
     def checkpoint(frame: int) -> None:
+        """Write the checkpoint of ``frame`` (collective)."""
         path = run_dir.file("checkpoint.npz")
         _io(sim, path, save_checkpoint, path, sim, state, frame,
             len(trajectory.times) if trajectory.rank0 else 0, rows,
