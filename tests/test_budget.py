@@ -20,7 +20,8 @@ from test_cli import read_stats
 
 from fem_anim.cli import main
 from fem_anim.errors import ConvergenceError
-from fem_anim.simulation.loop import AdaptiveStepper, Simulation
+from fem_anim.simulation.adaptive import AdaptiveStepper
+from fem_anim.simulation.loop import Simulation
 from fem_anim.solver.stopping import BUDGET_REASON, CONVERGED_REASONS, accept_at_budget
 
 DT = 1.0 / 30.0

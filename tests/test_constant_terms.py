@@ -29,7 +29,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import compat
-from fem_anim.problem.objective import compile_forms
+from fem_anim.problem.form_compiler import compile_forms
 from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 

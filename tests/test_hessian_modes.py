@@ -376,7 +376,7 @@ def test_reduced_hard_bench_table():
 
 def _default_run(frames: int, hessian: str, extra=()) -> list[dict]:
     """The default scene for ``frames`` frames (adaptive stepper): its stats rows."""
-    from fem_anim.simulation.loop import AdaptiveStepper
+    from fem_anim.simulation.adaptive import AdaptiveStepper
 
     scene = load_scene(None, [f"time.steps={frames}", f'solver.hessian="{hessian}"', *extra])
     sim = Simulation(scene, MPI.COMM_WORLD)

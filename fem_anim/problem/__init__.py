@@ -1,7 +1,13 @@
-"""The step objective bound to DOLFINx (seed section 3.1): inertia, elastic energy (from
-``fem_anim.forms``), gravity, damping and obstacle contact compiled into one energy whose
-gradient and Hessian are taken by ``ufl.derivative``; the pins and animated handles, the
-per-point quadrature data, the terms assembled once, and the mixed (u, p) unknown.
+"""The step objective bound to DOLFINx (seed section 3.1): :class:`EnergyProblem`
+(``objective``) compiles inertia, elastic energy (from ``fem_anim.forms``), gravity, damping
+and obstacle contact into one energy whose gradient and Hessian are taken by
+``ufl.derivative``, and stages it each step. Its parts: the spaces, functions and measures
+(``discretisation``), the UFL terms (``energy_terms``), the filtered Hessian
+(``tangent_filter``), the pins (``pins``) and animated handles (``handles``), the matrices
+(``matrices``), the reported energies (``reported_energies``), the form compiler
+(``form_compiler``) and the assembly's log events (``events``); beside it the per-point quadrature
+data (``quadrature``), the terms assembled once (``constant_terms``) and the mixed (u, p)
+unknown (``mixed_space``).
 """
 
 from fem_anim.lazy_exports import lazy_exports
@@ -9,13 +15,14 @@ from fem_anim.lazy_exports import lazy_exports
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "ConstantTerms": "constant_terms",
     "QuadraticTerm": "constant_terms",
+    "default_quadrature_degree": "discretisation",
+    "JIT_OPTIONS": "form_compiler",
+    "compile_forms": "form_compiler",
     "PinMotion": "handles",
     "MixedFields": "mixed_space",
     "SchurPreconditioner": "mixed_space",
-    "EVENTS": "objective",
+    "EVENTS": "events",
     "EnergyProblem": "objective",
-    "FILTERED_MODES": "objective",
-    "compile_forms": "objective",
-    "default_quadrature_degree": "objective",
     "QuadratureData": "quadrature",
+    "FILTERED_MODES": "tangent_filter",
 })

@@ -1,18 +1,15 @@
-"""The step objective's terms with a constant Hessian, assembled once (issue 18, point 5).
+"""The step objective's terms with a constant Hessian, assembled once.
 
 The step objective g(x) = 1/2 ||x - y||_M^2 + w E(x) (seed eq. 4) has terms whose Hessian
 does not depend on x: the inertia term (Hessian M, the mass matrix of seed eqs. 17-20),
 Rayleigh damping's dissipation c/2 (x - x_d)^T C (x - x_d) (:mod:`fem_anim.forms.damping`)
 and gravity's potential -int rho g . u (linear: gradient the constant nodal force, zero
-Hessian). Assembling them with the elastic term at every Newton iteration costs the mass
-integral's quadrature (degree 2k: 4 points per P1 tetrahedron against the elastic rule's 1)
-in every objective, residual and Jacobian. Taken out (with the residual's zero lifting,
-:meth:`fem_anim.problem.objective.EnergyProblem.residual`), the exact step on the 11.5k-tetrahedron
-beam went from 52.8 to 49.4 ms (residual -26 %, Hessian assembly -4 %) and on two ranks
-from 47.2 to 41.5 ms, side by side (README, "Session 7").
+Hessian). Assembling them with the elastic term at every Newton iteration would cost the
+mass integral's quadrature (degree 2k: 4 points per P1 tetrahedron against the elastic
+rule's 1) in every objective, residual and Jacobian.
 
 Here each is kept as what it is, assembled once by DOLFINx from the same UFL forms (the
-Hessians by ``ufl.derivative`` of the terms, STYLE rule 2):
+Hessians by ``ufl.derivative`` of the terms):
 
 * a quadratic term 1/2 s (x - a)^T Q (x - a) as its matrix Q, its anchor a (a Function:
   the predictor y, the damping anchor x_d) and its scale s (1, or a Constant: c);

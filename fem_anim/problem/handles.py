@@ -35,6 +35,8 @@ class PinMotion:
 
     @classmethod
     def from_scene(cls, pin: dict, dofs: np.ndarray, X: np.ndarray) -> "PinMotion":
+        """The motion of a validated ``[[pin]]`` table (centre: the box's, axis: z, by
+        default) for its located nodes ``dofs`` with rest coordinates ``X`` (m)."""
         d = X.shape[1]
         center = pin["center"] if pin["center"] is not None else \
             0.5 * (np.asarray(pin["min"]) + np.asarray(pin["max"]))

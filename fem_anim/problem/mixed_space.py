@@ -3,8 +3,9 @@
 With ``element.formulation = "mixed"`` the unknown of a step is ``w = (u, p~)`` in the
 mixed space P_k^d x P_{k-1} (Taylor-Hood for k = 2), ``p~ = p / mu`` the pressure in units
 of the shear modulus (so that both blocks of the saddle-point Hessian scale like ``mu``).
-The energy is :func:`fem_anim.forms.incompressible.lagrangian`; :mod:`fem_anim.problem.objective` builds the
-forms. This module holds what the displacement-only problem has no use for:
+The energy is :func:`fem_anim.forms.incompressible.lagrangian`;
+:mod:`fem_anim.problem.energy_terms` builds the forms. This module holds what the
+displacement-only problem has no use for:
 
 * :class:`MixedFields`: the mixed space, the maps between its dofs and those of the
   collapsed displacement and pressure spaces (everything time stepping keeps -- predictor,
@@ -114,5 +115,6 @@ class SchurPreconditioner:
         compat.set_schur_user_matrix(pc, self.matrix)
 
     def destroy(self) -> None:
+        """Free the PETSc matrices and index sets."""
         for obj in (self.mass, self.matrix, self.is_u, self.is_p):
             obj.destroy()

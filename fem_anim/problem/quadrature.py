@@ -1,8 +1,9 @@
 """Per-quadrature-point data of the elastic rule, computed in numpy (seed section 4.4).
 
 Some materials' psi needs a quantity UFL cannot express (corotated's tr sqrt(C), a
-batched SVD: :data:`forms.material.EXTRA_DATA`), and the projected Newton Hessian needs
-the PSD projection of the material tangent (:func:`fem_anim.solver.hessian_modification.project_psd`).
+batched SVD: :data:`fem_anim.forms.material.EXTRA_DATA`), and the projected Newton Hessian
+needs the PSD projection of the material tangent
+(:func:`fem_anim.solver.hessian_modification.project_psd`).
 :class:`QuadratureData` holds such a field as a quadrature-space Function and refreshes it
 from a compiled UFL expression and a vectorised numpy map.
 """
@@ -26,8 +27,9 @@ class QuadratureData:
     Holds a quadrature-space Function and a compiled expression (F, or the material
     tangent) at the points of the elastic quadrature rule; :meth:`update` evaluates it on
     every local cell (owned and ghost, so no communication is needed) and applies a numpy
-    map in one vectorised call: the extra data of :data:`forms.material.EXTRA_DATA`, or
-    the PSD projection of :func:`fem_anim.solver.hessian_modification.project_psd`.
+    map in one vectorised call: the extra data of
+    :data:`fem_anim.forms.material.EXTRA_DATA`, or the PSD projection of
+    :func:`fem_anim.solver.hessian_modification.project_psd`.
     """
 
     function: fem.Function

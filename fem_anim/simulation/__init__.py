@@ -1,5 +1,8 @@
-"""The time loop (seed section 3.1): integrators' predictors and updates, the initial state,
-adaptive retries, checkpoints and resume, interrupts, the progress bar and the energy report.
+"""The time loop (seed section 3.1): the simulation of a scene and its step (``loop``), the
+integrators' predictors and updates (``integrators``), the initial state (``initial_state``),
+each step's start (``newton_start``), adaptive retries (``adaptive``), the frame loop and its
+files (``run_loop``), checkpoints and resume, interrupts, the progress bar and the energy
+report.
 """
 
 from fem_anim.lazy_exports import lazy_exports
@@ -24,9 +27,11 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "Interrupts": "interrupt",
     "SIGNALS": "interrupt",
     "stop_at_once": "interrupt",
-    "AdaptiveStepper": "loop",
-    "RunResult": "loop",
+    "AdaptiveStepper": "adaptive",
+    "RunResult": "run_loop",
     "Simulation": "loop",
     "solver_options": "loop",
+    "collision_free_guess": "newton_start",
+    "initial_guess": "newton_start",
     "Progress": "progress",
 })

@@ -152,7 +152,7 @@ def load_checkpoint(path: Path, sim) -> Checkpoint:
 
     Raises:
         FemAnimError: if the file is missing or unreadable, was written for another
-            scene or mesh, or holds an impossible record (:func:`_invalid`).
+            scene or mesh, or holds an impossible record (``_invalid``).
     """
     comm = sim.comm
     error, data = None, None

@@ -21,14 +21,9 @@ potentials; its velocity update v_{n+1} = v_n + h/2 (a_n + a_{n+1}) lets the for
 start of a step act over half of the step. The IPC barrier's force is large at the deepest
 point of an impact and zero one step later, when the body has left the barrier's range:
 the half-step impulse h/2 a_n then accelerates a body the barrier no longer holds, with no
-potential energy paying for it. Measured (a 0.2 x 0.2 x 0.1 m block, E = 1e5 Pa,
-dhat = 3 mm, kappa = 1e4 Pa, dt = 0.01 s, frictionless): the total energy stays within
-0.1 J of 6.2 J in flight and jumps to 11.6 J over the two steps of the impact; on
-``demos/jelly_cube.toml`` (element size 0.1) the frictionless cube gains 11 % at
-dt = 0.01 s, 76 % at 0.0025 s and 43 % at 0.001 s: a smaller step does not cure it.
-Lagged friction (IPC: pressure and tangent from the step's start) adds to it by the same
-mechanism (the previous step's friction force acts after the slip has turned; 25 % instead
-of 11 % with mu = 0.5 on the jelly cube at dt = 0.01 s), and moves the energy up as well as
+potential energy paying for it; a smaller step does not cure it. Lagged friction (IPC:
+pressure and tangent from the step's start) adds to it by the same mechanism (the previous
+step's friction force acts after the slip has turned), and moves the energy up as well as
 down while sliding. It is inherent to the scheme, not a defect of the friction term, which
 is dissipative within its own step (convex, minimal at zero slip): under BDF2 the same
 scenes (jelly cube with and without friction, the sliding block) never rise above their
@@ -194,7 +189,8 @@ def describe_energy(report: dict, scene) -> str:
 def write_summary(path: Path, scene, rows: list[dict], report: dict,
                   provenance: dict | None = None) -> None:
     """``summary.json``: steps, final time, retries, iterations and the energy report, then
-    ``provenance`` (software versions, PETSc options, wall time: :mod:`fem_anim.output.provenance`)."""
+    ``provenance`` (software versions, PETSc options, wall time:
+    :mod:`fem_anim.output.provenance`)."""
     summary = {
         "scene": scene.name, "integrator": scene["time"]["integrator"],
         "dt": scene["time"]["dt"], "steps": len(rows),

@@ -1,14 +1,15 @@
 """Time-stepping state: predictors and updates of each scheme (seed section 3.1).
 
 The minimisation itself is the same for every scheme (:mod:`fem_anim.problem.objective`,
-:mod:`forms.integrator`); a scheme differs only in the predictor y it stages before the
+:mod:`fem_anim.forms.time_schemes`); a scheme differs only in the predictor y it stages before the
 solve and in how it updates velocity (and acceleration) after it:
 
 * :meth:`Integrator.predictor` gives y - X and :meth:`Integrator.weight` the energy weight
   w, from the state (u_n, v_n, a_n, and u_{n-1}, v_{n-1} for BDF2);
 * :meth:`Integrator.update` computes v_{n+1} (and a_{n+1}) from the solution.
 
-:meth:`fem_anim.simulation.loop.Simulation.step` stages these into the problem and solves.
+:meth:`fem_anim.simulation.loop.Simulation.step` stages these into the problem
+(:meth:`fem_anim.problem.objective.EnergyProblem.stage`) and solves.
 
 All updates are whole-array numpy operations on local (owned + ghost) values, which are
 consistent across ranks because every operand is.
@@ -43,13 +44,14 @@ class State:
 
 
 class Integrator:
-    """Predictor and update of one scheme of :data:`forms.integrator.SCHEMES`."""
+    """Predictor and update of one scheme of :data:`fem_anim.forms.time_schemes.SCHEMES`."""
 
     def __init__(self, name: str):
         self.scheme: Scheme = SCHEMES[name]
 
     @property
     def name(self) -> str:
+        """The scheme's name (``time.integrator``)."""
         return self.scheme.name
 
     def weight(self, h: float, state: State) -> float:
@@ -59,7 +61,7 @@ class Integrator:
         return self.scheme.weight * h * h
 
     def predictor(self, h: float, state: State) -> np.ndarray:
-        """y - X for the step from ``state`` (table in :mod:`forms.integrator`)."""
+        """y - X for the step from ``state`` (table in :mod:`fem_anim.forms.time_schemes`)."""
         if self.name == "newmark":
             return state.u + h * state.v + 0.25 * h * h * state.a  # seed eq. 3
         if self.name == "bdf2" and state.u_old is not None:
@@ -70,7 +72,7 @@ class Integrator:
     def damping_anchor(self, h: float, state: State) -> tuple[float, np.ndarray]:
         """(c, u_d) of the Rayleigh dissipation potential c/2 (u - u_d)^T C (u - u_d).
 
-        With v_{n+1} = (u - u_d)/tau for the scheme, c = w/tau (:mod:`forms.damping`):
+        With v_{n+1} = (u - u_d)/tau for the scheme, c = w/tau (:mod:`fem_anim.forms.damping`):
         newmark tau = h/2, u_d = u_n + h/2 v_n (v_{n+1} = 2 (u - u_n)/h - v_n);
         bdf2 tau = 2h/3, u_d = (4 u_n - u_{n-1})/3; implicit Euler tau = h, u_d = u_n.
         Symplectic Euler takes the damping implicitly, as implicit Euler does.

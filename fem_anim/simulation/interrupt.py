@@ -90,7 +90,7 @@ class stop_at_once(_Handlers):
     There is nothing to keep yet, but a compile killed by SIGTERM, or stopped by SIGINT's
     KeyboardInterrupt (a BaseException FFCx does not clean up after), would leave FFCx's
     lock file in the JIT cache, and every later run would wait for it and fail. FFCx
-    releases its lock on an Exception, which :class:`Interrupted` is (see also
+    releases its lock on an Exception, which :class:`~fem_anim.errors.Interrupted` is (see also
     :func:`fem_anim.compat.jit_locks_released`).
     """
 

@@ -23,10 +23,12 @@ class Progress:
             self._bar = tqdm(total=total, unit="step", desc="fem-anim", dynamic_ncols=True)
 
     def update(self, newton_its: int, advance: int = 1) -> None:
+        """Advance the bar by ``advance`` frames, showing the last step's Newton iterations."""
         if self._bar is not None:
             self._bar.set_postfix(newton=newton_its, refresh=False)
             self._bar.update(advance)
 
     def close(self) -> None:
+        """Close the bar."""
         if self._bar is not None:
             self._bar.close()

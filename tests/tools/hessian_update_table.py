@@ -22,7 +22,8 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_anim.scene import load_scene
-from fem_anim.simulation.loop import AdaptiveStepper, Simulation
+from fem_anim.simulation.adaptive import AdaptiveStepper
+from fem_anim.simulation.loop import Simulation
 
 #: (label, solver keys); the first is the reference.
 OPTIONS = [

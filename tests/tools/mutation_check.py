@@ -329,7 +329,7 @@ MUTATIONS: list[Mutation] = [
              "        if not self._pins_on_target():", "        if False:",
              ("tests/test_constant_terms.py::test_constant_terms_equal_the_single_form",),
              "the residual's lifting skipped although the pins are off their values"),
-    Mutation("pins-not-owners-choice", "fem_anim/problem/objective.py",
+    Mutation("pins-not-owners-choice", "fem_anim/problem/pins.py",
              "            dofs = self._owners_choice(dofs)\n", "",
              ("tests/test_constant_terms.py::test_constant_terms_under_mpi",),
              "each rank pins the vertices its own dof coordinates put in the box (a vertex on "

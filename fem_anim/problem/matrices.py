@@ -1,0 +1,98 @@
+"""The step objective's PETSc matrices and vectors: the Jacobian with its near-nullspace,
+the residual vector, a vertex's average mass.
+
+:class:`Matrices` is a part of :class:`~fem_anim.problem.objective.EnergyProblem`: it reads
+the problem's compiled ``jacobian_form``, ``residual_form`` and ``mass_form``, its ``V``,
+``d``, ``comm``, ``mixed``, ``ipc`` and ``schur``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from dolfinx.fem import petsc as fem_petsc
+from petsc4py import PETSc
+
+__all__ = ["Matrices", "orthonormalize"]
+
+
+def orthonormalize(vectors: list[PETSc.Vec]) -> None:
+    """Modified Gram-Schmidt on distributed PETSc vectors, in place (collective)."""
+    for i, v in enumerate(vectors):
+        for w in vectors[:i]:
+            v.axpy(-v.dot(w), w)
+        v.normalize()
+
+
+class Matrices:
+    """Creating the Jacobian matrix and vectors of the step objective."""
+
+    def create_matrix(self, mat_type: str | None = None) -> PETSc.Mat:
+        """The Jacobian matrix, sparsity and preallocation built once (collective).
+
+        It carries the rigid-body modes as near-nullspace, which algebraic multigrid
+        (``cg-gamg``) needs for elasticity and every other solver ignores (not for the
+        mixed (u, p) unknown). With ``[contact]`` it accepts new nonzeros: contact pairs
+        couple dofs the elastic pattern does not.
+
+        Args:
+            mat_type: PETSc matrix type; ``"baij"`` stores d x d blocks (one insertion per
+                vertex pair), which PETSc's and MUMPS's Cholesky and GAMG reject (LU, ILU,
+                ICC, Jacobi, SOR and hypre accept it). None: DOLFINx's default (AIJ).
+        """
+        A = fem_petsc.create_matrix(self.jacobian_form, mat_type)
+        A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        if self.ipc is not None:  # contact pairs couple dofs the elastic pattern does not
+            A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        if not self.mixed:  # the modes of the displacement block only: not set for (u, p)
+            A.setNearNullSpace(self.rigid_body_modes())
+        return A
+
+    def configure_preconditioner(self, pc: PETSc.PC) -> None:
+        """Give a ``fieldsplit`` PC the fields of a mixed problem (``schur`` preset)."""
+        if self.schur is not None and pc.getType() == "fieldsplit":
+            self.schur.configure(pc)
+
+    def rigid_body_modes(self) -> PETSc.NullSpace:
+        """Translations and infinitesimal rotations of the body, orthonormalised (collective)."""
+        x = self.V.tabulate_dof_coordinates()
+        n_owned = self.V.dofmap.index_map.size_local
+        x = x[:n_owned, : self.d]
+        d = self.d
+        modes = []
+        for axis in range(d):
+            mode = np.zeros((n_owned, d))
+            mode[:, axis] = 1.0
+            modes.append(mode)
+        planes = [(0, 1)] if d == 2 else [(0, 1), (1, 2), (2, 0)]
+        for i, j in planes:  # rotation in the (i, j) plane: (-x_j, x_i)
+            mode = np.zeros((n_owned, d))
+            mode[:, i], mode[:, j] = -x[:, j], x[:, i]
+            modes.append(mode)
+        vectors = []
+        for mode in modes:
+            v = self.create_vector()
+            v.array[:] = mode.ravel()
+            vectors.append(v)
+        orthonormalize(vectors)
+        return PETSc.NullSpace().create(vectors=vectors, comm=self.comm)
+
+    def create_vector(self) -> PETSc.Vec:
+        """A vector of the unknown's layout (the residual's)."""
+        return fem_petsc.create_vector(self.residual_form)
+
+    def average_vertex_mass(self) -> float:
+        """1^T M 1 / n_dofs: the mass of the body per vertex (kg), M without pins (collective).
+
+        Over d n_vertices dofs, 1^T M 1 = d m_total: the vertex average IPC's adaptive
+        stiffness takes (:meth:`fem_anim.contact.ipc.IPCContact.stage`).
+        """
+        M = fem_petsc.assemble_matrix(self.mass_form)
+        M.assemble()
+        ones = M.createVecRight()
+        ones.set(1.0)
+        Mones = ones.duplicate()
+        M.mult(ones, Mones)
+        average = Mones.sum() / ones.getSize()
+        for obj in (ones, Mones, M):
+            obj.destroy()
+        return average
