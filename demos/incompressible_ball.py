@@ -33,7 +33,7 @@ from mpi4py import MPI
 
 from fem_anim import compat
 from fem_anim.scene import load_scene
-from fem_anim.simulation.loop import Simulation
+from fem_anim.simulation import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent

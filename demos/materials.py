@@ -32,7 +32,7 @@ from mpi4py import MPI
 
 from fem_anim.reference import cell_volumes, deformation_gradient
 from fem_anim.scene import load_scene
-from fem_anim.simulation.loop import Simulation
+from fem_anim.simulation import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 OUT = Path(os.environ.get("FEM_ANIM_DEMO_OUT", "out/demos")) / "materials"

@@ -36,7 +36,7 @@ from scipy.optimize import brentq
 
 from fem_anim.reference import deformation_gradient
 from fem_anim.scene import load_scene
-from fem_anim.simulation.loop import Simulation
+from fem_anim.simulation import Simulation
 
 REDUCED = os.environ.get("FEM_ANIM_DEMO_REDUCED") == "1"
 HERE = Path(__file__).resolve().parent

@@ -22,7 +22,7 @@ def build_volume_from_surface(model, points: np.ndarray, triangles: np.ndarray,
     up to the chords cut across curved regions.
 
     The caller checks that the surface is closed and manifold
-    (:func:`fem_anim.mesh.build.check_surface`): gmsh's own failure on an open surface names
+    (:func:`fem_anim.mesh.checks.check_surface`): gmsh's own failure on an open surface names
     no edge.
 
     Physical groups: ``body`` (tag 1) and ``surface`` (tag 1 in dimension 2).

@@ -121,7 +121,7 @@ def assert_rows_meet_the_test(rows, rtol: float = README_RTOL, atol: float = REA
         rtol: The relative tolerance.
         atol: The absolute tolerance.
     """
-    from fem_anim.solver.minimiser import CONVERGED_REASONS
+    from fem_anim.solver.stopping import CONVERGED_REASONS
 
     for row in rows:
         target = max(atol, rtol * row["initial_residual_norm"])

@@ -69,7 +69,7 @@ from scenes import POISSON_RATIO, YOUNGS_MODULUS, beam, make_scene
 from test_reference_comparison import rotation
 
 from fem_anim import compat, reference
-from fem_anim.mesh.build import mesh_from_arrays
+from fem_anim.mesh.simplex import mesh_from_arrays
 from fem_anim.problem.objective import EnergyProblem
 from fem_anim.simulation.loop import Simulation
 

@@ -205,7 +205,7 @@ def test_mixed_energy_matches_the_numpy_reference(d, model):
     from fem_anim.forms.incompressible import lagrangian
 
     from fem_anim import reference
-    from fem_anim.mesh.build import mesh_from_arrays
+    from fem_anim.mesh.simplex import mesh_from_arrays
     from fem_anim.output.files import VertexGather
     from fem_anim.reference.mixed_energy import mixed_energy, mixed_gradient, mixed_hessian
 

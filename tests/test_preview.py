@@ -20,7 +20,7 @@ from fem_anim.bench.worker import measure
 from fem_anim.cli import main
 from fem_anim.errors import SceneError
 from fem_anim.scene import default_scene_text, load_scene
-from fem_anim.solver.minimiser import BUDGET_REASON, CONVERGED_REASONS
+from fem_anim.solver.stopping import BUDGET_REASON, CONVERGED_REASONS
 from fem_anim.scene.modes import SOLVER_MODES
 
 STEPS = 20

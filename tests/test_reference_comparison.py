@@ -39,7 +39,7 @@ from petsc4py import PETSc
 from scenes import DENSITY, DIVISIONS, LENGTHS, POISSON_RATIO, YOUNGS_MODULUS, beam, make_scene
 
 from fem_anim import compat, reference
-from fem_anim.mesh.build import mesh_from_arrays
+from fem_anim.mesh.simplex import mesh_from_arrays
 from fem_anim.output.files import VertexGather
 from fem_anim.problem.objective import EnergyProblem
 from fem_anim.simulation.loop import Simulation

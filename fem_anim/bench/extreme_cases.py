@@ -9,7 +9,7 @@ elements in one step): :func:`cases`. Its expected outcome is derived from the s
 - :data:`FINISHES`: the continuous problem is well posed, the run must complete, either
   ``converges-bounded`` (every step converges at once) or ``recovers-by-substepping``
   (some steps fail, the adaptive stepper halves dt and the run completes,
-  :class:`fem_anim.simulation.loop.AdaptiveStepper`); which of the two is solver behaviour,
+  :class:`fem_anim.simulation.adaptive.AdaptiveStepper`); which of the two is solver behaviour,
   reported but not expected;
 - ``recovers-by-substepping``: the first step's pin motion alone inverts a layer of
   elements, the full step cannot start, a smaller one can;

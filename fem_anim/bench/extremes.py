@@ -78,7 +78,8 @@ def run_case(case: Case, comm=None, overrides: list[str] = ()) -> Outcome:
     from mpi4py import MPI
 
     from fem_anim.simulation.energy_report import energy_report, initial_energies
-    from fem_anim.simulation.loop import AdaptiveStepper, Simulation
+    from fem_anim.simulation.adaptive import AdaptiveStepper
+    from fem_anim.simulation.loop import Simulation
 
     comm = comm or MPI.COMM_WORLD
     data = case.keys | {"time": case.keys["time"] | {"steps": case.steps}}
@@ -181,7 +182,8 @@ def locking_rows(full: bool = False, comm=None) -> list[dict]:
 
 def _settled_tip(data: dict, comm) -> float:
     """Downward tip deflection after 3 implicit Euler steps of 1 s (the beam at rest)."""
-    from fem_anim.simulation.loop import AdaptiveStepper, Simulation
+    from fem_anim.simulation.adaptive import AdaptiveStepper
+    from fem_anim.simulation.loop import Simulation
     from fem_anim.bench.measure import PointSampler
 
     scene = load_case_scene(data)

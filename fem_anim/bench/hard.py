@@ -177,8 +177,9 @@ def run_scene(hard: HardScene, mode: str, comm=None) -> dict:
     from mpi4py import MPI
 
     from fem_anim.errors import ConvergenceError
-    from fem_anim.simulation.loop import AdaptiveStepper, Simulation
-    from fem_anim.solver.minimiser import HESSIAN_KINDS
+    from fem_anim.simulation.adaptive import AdaptiveStepper
+    from fem_anim.simulation.loop import Simulation
+    from fem_anim.solver.hessian_choice import HESSIAN_KINDS
 
     comm = comm or MPI.COMM_WORLD
     scene = _scene(hard, mode)

@@ -26,7 +26,8 @@ from fem_anim import compat
 from fem_anim.simulation.energy_report import energy_report, initial_energies
 from fem_anim.errors import ConvergenceError
 from fem_anim.mesh.build import build_mesh
-from fem_anim.simulation.loop import AdaptiveStepper, Simulation
+from fem_anim.simulation.adaptive import AdaptiveStepper
+from fem_anim.simulation.loop import Simulation
 
 __all__ = ["PointSampler", "Measurement", "measure_configuration", "median_run"]
 

@@ -14,8 +14,6 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_anim.errors import MeshError
-# fem_anim.problem.objective imports cell_volumes from here
-from fem_anim.mesh.checks import cell_volumes  # noqa: F401
 from fem_anim.mesh.gmsh_session import gmsh_arrays, gmsh_session
 from fem_anim.mesh.mesh_file import read_mesh_file
 from fem_anim.mesh.simplex import SimplexMesh, mesh_from_arrays

@@ -26,7 +26,7 @@ from mpi4py import MPI
 
 from fem_anim import compat
 from fem_anim.errors import FemAnimError, describe_os_error
-from fem_anim.mesh.build import SimplexMesh
+from fem_anim.mesh.simplex import SimplexMesh
 from fem_anim.output.rundir import (RENDER_PRODUCTS, STAGING, claim, install, read_manifest,
                                     write_atomically)
 

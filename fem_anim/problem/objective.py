@@ -37,7 +37,7 @@ from petsc4py import PETSc
 
 from fem_anim import compat
 from fem_anim.contact.ipc import IPCContact
-from fem_anim.mesh.build import SimplexMesh
+from fem_anim.mesh.simplex import SimplexMesh
 from fem_anim.mesh.regions import local_cell_markers
 from fem_anim.problem.constant_terms import ConstantTerms, QuadraticTerm
 from fem_anim.problem.discretisation import Discretisation

@@ -11,7 +11,7 @@ import numpy as np
 from dolfinx.fem import petsc as fem_petsc
 
 from fem_anim import compat
-from fem_anim.mesh.build import cell_volumes
+from fem_anim.mesh.checks import cell_volumes
 from fem_anim.problem.events import EVENTS
 
 __all__ = ["ReportedEnergies"]

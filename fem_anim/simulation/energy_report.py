@@ -111,12 +111,12 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         see the module docstring).
         ``unconverged_steps`` lists the steps kept at the round-off floor of the objective
         without meeting their stopping test (``snes_reason`` =
-        :data:`fem_anim.solver.minimiser.POLISH_FAILED_REASON`); ``budget_steps`` those accepted
+        :data:`fem_anim.solver.stopping.POLISH_FAILED_REASON`); ``budget_steps`` those accepted
         at their iteration budget without meeting it (``solver.on_budget = "accept"``,
-        :data:`fem_anim.solver.minimiser.BUDGET_REASON`).
+        :data:`fem_anim.solver.stopping.BUDGET_REASON`).
     """
     # here: importing PETSc waits for init_petsc
-    from fem_anim.solver.minimiser import BUDGET_REASON, POLISH_FAILED_REASON
+    from fem_anim.solver.stopping import BUDGET_REASON, POLISH_FAILED_REASON
 
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]

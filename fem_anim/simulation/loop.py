@@ -29,19 +29,19 @@ from petsc4py import PETSc
 from fem_anim import compat
 from fem_anim.errors import ConvergenceError, FemAnimError
 from fem_anim.mesh.bodies import build_scene_mesh
-from fem_anim.mesh.build import SimplexMesh
+from fem_anim.mesh.simplex import SimplexMesh
 from fem_anim.output.files import CellGather, VertexGather
 from fem_anim.output.provenance import WallClock
 from fem_anim.petsc_options import flatten_options, merge_options
 from fem_anim.problem.form_compiler import JIT_OPTIONS
 from fem_anim.problem.objective import EnergyProblem
-from fem_anim.simulation.adaptive import AdaptiveStepper  # noqa: F401 (bench imports it here)
 from fem_anim.scene.consistency import MIXED_PRESETS
 from fem_anim.simulation.initial_state import initial_velocity
 from fem_anim.simulation.integrators import Integrator, State
 from fem_anim.simulation.newton_start import initial_guess
 from fem_anim.simulation.run_loop import RunResult, run_frames
-from fem_anim.solver.minimiser import NONLINEAR_METHODS, Minimiser, SolveStats
+from fem_anim.solver.minimiser import NONLINEAR_METHODS, Minimiser
+from fem_anim.solver.solve_stats import SolveStats
 from fem_anim.solver.presets import (MIXED_ONLY_PRESETS, NEWTON_DEFAULTS, drop_replaced,
                                      forcing_options, parallel_note, preset_options)
 

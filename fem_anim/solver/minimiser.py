@@ -36,16 +36,12 @@ from petsc4py import PETSc
 
 from fem_anim.errors import ConvergenceError, FemAnimError
 from fem_anim.petsc_options import DEFAULT_PREFIX, options_in_database, unused_options
-from fem_anim.solver.hessian_choice import HESSIAN_KINDS  # noqa: F401  (re-exported)
 from fem_anim.solver.hessian_choice import FAILED_DIRECTION, HessianChoice
 from fem_anim.solver.hessian_reuse import HessianReuse
 from fem_anim.solver.solve_stats import SolveStats
 from fem_anim.solver.step_bounds import bound_step, filter_inverting
 from fem_anim.solver.stopping import (ROUNDOFF_REASON, StoppingTest, accept_at_budget,
                                       at_objective_roundoff, finish_at_roundoff, reason_name)
-# re-exported for modules that still import them from here (home: stopping, hessian_choice)
-from fem_anim.solver.stopping import (BUDGET_REASON, CONVERGED_REASONS,  # noqa: F401
-                                      POLISH_FAILED_REASON)
 
 __all__ = ["Minimiser", "NONLINEAR_METHODS"]
 

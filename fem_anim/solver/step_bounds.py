@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from petsc4py import PETSc
 
-from fem_anim.problem.objective import EVENTS
+from fem_anim.problem.events import EVENTS
 
 __all__ = ["MAX_FILTER_HALVINGS", "bound_step", "filter_inverting", "step_limit"]
 

@@ -44,7 +44,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import compat, reference
-from fem_anim.mesh.build import mesh_from_arrays
+from fem_anim.mesh.simplex import mesh_from_arrays
 from fem_anim.output.files import VertexGather
 from fem_anim.problem.objective import EnergyProblem
 from fem_anim.simulation.loop import Simulation
