@@ -3,7 +3,7 @@
 #
 # `demos/imported_mesh.toml` reads `meshes/data/icosphere.stl`, a closed triangle surface
 # (a twice-subdivided icosahedron of radius 0.1 m), which gmsh fills with tetrahedra
-# (`fem_anim.mesh.build.read_mesh_file`). The soft neo-Hookean ball (E = 2e4 Pa, nu = 0.3,
+# (`fem_anim.mesh.mesh_file.read_mesh_file`). The soft neo-Hookean ball (E = 2e4 Pa, nu = 0.3,
 # 1000 kg/m^3) is thrown with `[initial]` velocity v_0 = (0.5, 0, 3) m/s and angular velocity
 # omega = (0, 10, 0) rad/s about its centre of mass, under gravity g = (0, 0, -9.81) m/s^2;
 # the spin stretches it (centrifugal strain rho omega^2 r^2 / E = 0.05) and it wobbles.
