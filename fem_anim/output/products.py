@@ -39,7 +39,7 @@ __all__ = ["check_may_write", "staged_products", "write_product", "STAGING_PREFI
 STAGING_PREFIX = ".fem_anim-staging-"
 
 
-def check_may_write(folder: Path, names: Iterable[str]) -> None:
+def check_may_write(folder: Path, names: Iterable[str], comm=None) -> None:
     """Refuse a folder that holds a file of one of ``names`` which fem_anim did not write.
 
     A missing folder, or one without any of these files, may be written; so may a file
@@ -48,10 +48,22 @@ def check_may_write(folder: Path, names: Iterable[str]) -> None:
     Args:
         folder: The folder the command writes into.
         names: Relative POSIX paths of the files the command would write there.
+        comm: An MPI communicator: decided on its rank 0 and raised on every rank
+            (default: decided here).
 
     Raises:
         FemAnimError: naming the first such file (or ``folder``, if it is a file).
     """
+    if comm is not None:
+        error = None
+        if comm.rank == 0:
+            try:
+                check_may_write(folder, names)
+            except FemAnimError as err:
+                error = str(err)
+        if (error := comm.bcast(error, root=0)):
+            raise FemAnimError(error)
+        return
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise FemAnimError(f"{folder} exists and is not a folder")
