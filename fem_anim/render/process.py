@@ -59,8 +59,9 @@ def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
                           "pictures are as they were", signal.SIGINT) from None
     proc = subprocess.CompletedProcess(child.args, child.returncode, stdout, stderr)
     message = proc.stderr.strip()
-    if proc.returncode == 2 and message.startswith("fem-anim: error: "):
-        raise FemAnimError(message.splitlines()[-1].removeprefix("fem-anim: error: "))
+    last = message.splitlines()[-1] if message else ""  # after ffmpeg's own complaints
+    if proc.returncode == 2 and last.startswith("fem-anim: error: "):
+        raise FemAnimError(last.removeprefix("fem-anim: error: "))
     if proc.returncode < 0 or proc.returncode - 128 in (signal.SIGINT, signal.SIGTERM,
                                                          signal.SIGHUP):
         signum = -proc.returncode if proc.returncode < 0 else proc.returncode - 128
