@@ -214,6 +214,15 @@ def test_render_into_a_users_folder_writes_only_its_own_names(foreign):
     assert main(["render", str(foreign), "-q", *FAST]) == 0  # its own: replaced
 
 
+def test_a_run_into_a_folder_render_wrote_keeps_the_users_trajectory(foreign, capsys):
+    assert main(["render", str(foreign), "-q", *FAST]) == 0  # now marked, by render
+    users = {name: (foreign / name).read_bytes() for name in RUN_FILES}
+    assert main(["run", "-q", *COARSE, "--set", "time.steps=1", "-o", str(foreign)]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "exists and was not written by fem-anim" in line, line
+    assert {name: (foreign / name).read_bytes() for name in RUN_FILES} == users
+
+
 def test_render_on_a_read_only_file_system_is_one_line(run_copy):
     before = tree(run_copy)
     r = read_only(run_copy, fem_anim_command() + ["render", str(run_copy)])
@@ -332,9 +341,14 @@ def test_trade_study_on_a_read_only_file_system_is_one_line(tiny, tmp_path):
     assert os.listdir(ro) == []
 
 
-def test_perf_bench_refuses_a_users_file_before_the_sweep(tmp_path, capsys):
+def never(*args, **kwargs):
+    raise AssertionError("measured before the output folder was checked")
+
+
+def test_perf_bench_refuses_a_users_file_before_the_sweep(tmp_path, capsys, monkeypatch):
     from fem_anim.bench import perf
 
+    monkeypatch.setattr(perf, "sweep", never)
     (tmp_path / "perf.md").write_text("the user's own")
     before = tree(tmp_path)
     assert perf.main(["--sizes", "0.1", "--steps", "2", "--presets", "cg-icc",
@@ -345,7 +359,10 @@ def test_perf_bench_refuses_a_users_file_before_the_sweep(tmp_path, capsys):
     assert tree(tmp_path) == before
 
 
-def test_extremes_refuses_a_users_file_before_the_cases(tmp_path, capsys):
+def test_extremes_refuses_a_users_file_before_the_cases(tmp_path, capsys, monkeypatch):
+    from fem_anim.bench import extremes
+
+    monkeypatch.setattr(extremes, "run_case", never)
     table = tmp_path / "table.md"
     table.write_text("the user's own")
     assert main(["bench", "--extremes", "-o", str(table)]) == 2

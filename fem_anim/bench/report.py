@@ -18,7 +18,8 @@ from fem_anim.bench.timing import growth_exponent
 from fem_anim.bench.worker import PHASE_COLUMNS
 from fem_anim.output.products import staged_products
 
-__all__ = ["PRODUCTS", "write", "exponent_text", "blas_rows", "mpi_rows", "machine_text", "md_table"]
+__all__ = ["PRODUCTS", "write", "exponent_text", "blas_rows", "mpi_rows", "machine_text",
+           "md_table"]
 
 COLUMNS = ("element_size", "preset", "ranks", "tets", "dofs", "newton_its", "linear_its",
            *PHASE_COLUMNS, "wall", "symbolic_calls", "first_step_s", "setup_s", "peak_mb")
