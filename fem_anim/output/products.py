@@ -12,7 +12,8 @@ an exporter) uses this module:
 * :func:`staged_products`: the command writes its files into a fresh hidden folder inside
   the target (a name no user file can have: :func:`tempfile.mkdtemp`), and only when all
   of them are complete are they renamed into place, each rename atomic, and added to the
-  manifest (:func:`fem_anim.output.rundir.install`, which checks ownership once more). An
+  manifest (:func:`fem_anim.output.rundir.install`, which checks ownership once more),
+  with SIGINT, SIGTERM and SIGHUP held meanwhile so that all are installed or none. An
   error or an interrupt removes the staging folder: no half-written file ever sits under
   a product's name, and the previous products stay as they were;
 * :func:`write_product`: one file (``-o FILE.md``) the same way.
@@ -26,7 +27,9 @@ from __future__ import annotations
 
 import contextlib
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -105,9 +108,24 @@ def staged_products(folder: Path, names: Iterable[str],
             raise FemAnimError(f"internal error: {sorted(made - names)} written into {folder} "
                                f"but not declared (declared: {sorted(names)})")
         old = names & read_manifest(folder) if replaces is None else set(replaces)
-        install(staging, folder, replaces=old)
+        with _signals_held():  # all files renamed and listed, or none
+            install(staging, folder, replaces=old)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP (delivered when the block ends), main thread only."""
+    held = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def write_product(path: Path, data: bytes) -> None:

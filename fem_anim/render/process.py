@@ -28,7 +28,10 @@ from fem_anim.errors import FemAnimError, Interrupted, describe_os_error
 from fem_anim.render.animation import render_directory
 from fem_anim.render.frames import render_vtu
 
-__all__ = ["render_file", "render_run"]
+__all__ = ["render_file", "render_run", "STOP_SIGNALS"]
+
+#: Signals that stop a rendering: it removes its staged files and installs nothing.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
@@ -62,8 +65,7 @@ def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
     last = message.splitlines()[-1] if message else ""  # after ffmpeg's own complaints
     if proc.returncode == 2 and last.startswith("fem-anim: error: "):
         raise FemAnimError(last.removeprefix("fem-anim: error: "))
-    if proc.returncode < 0 or proc.returncode - 128 in (signal.SIGINT, signal.SIGTERM,
-                                                         signal.SIGHUP):
+    if proc.returncode < 0 or proc.returncode - 128 in STOP_SIGNALS:
         signum = -proc.returncode if proc.returncode < 0 else proc.returncode - 128
         raise Interrupted(f"rendering stopped by signal {signum}; the previous pictures "
                           "are as they were", signum)
@@ -133,10 +135,12 @@ def main(argv: list[str] | None = None) -> int:
     stopped: dict[str, int] = {}
 
     def stop(signum, frame):  # SIGTERM and SIGHUP clean up like Ctrl-C
+        for sig in STOP_SIGNALS:  # a second signal must not cut the clean-up short
+            signal.signal(sig, signal.SIG_IGN)
         stopped["signum"] = signum
         raise KeyboardInterrupt
 
-    for sig in (signal.SIGTERM, signal.SIGHUP):
+    for sig in STOP_SIGNALS:
         signal.signal(sig, stop)
     try:
         if args.run:
