@@ -256,7 +256,8 @@ def _start_render(out: Path, extra: list[str]) -> subprocess.Popen:
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
 
 
-def test_sigint_while_rendering_leaves_the_old_pictures(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_while_rendering_leaves_the_old_pictures(tmp_path, sig):
     out = tmp_path / "run"
     assert main(["run", "-q", *COARSE, "--set", "time.steps=40", "-o", str(out)]) == 0
     assert main(["render", str(out), "-q", *FAST]) == 0  # the previous rendering
@@ -270,10 +271,16 @@ def test_sigint_while_rendering_leaves_the_old_pictures(tmp_path):
             break
         time.sleep(0.02)
     assert len(staged) >= 2, proc.communicate()
-    os.killpg(proc.pid, signal.SIGINT)
+    os.killpg(proc.pid, sig)
     _, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 128 + signal.SIGINT, stderr
-    assert "interrupted" in one_error_line(stderr)
+    if sig == signal.SIGINT:
+        assert proc.returncode == 128 + signal.SIGINT, stderr
+        assert "interrupted" in one_error_line(stderr)
+    else:  # the command dies at once; its renderer cleans up on its own
+        assert proc.returncode == -signal.SIGTERM, stderr
+        deadline = time.time() + 60
+        while list(out.glob(f"{STAGING_PREFIX}*")) and time.time() < deadline:
+            time.sleep(0.05)
     assert tree(out) == before  # no frame, no GIF, no staging folder
     assert not (out / "frames").exists()
 
@@ -369,3 +376,24 @@ def test_extremes_refuses_a_users_file_before_the_cases(tmp_path, capsys, monkey
     line = one_error_line(capsys.readouterr().err)
     assert f"{table} was not written by fem-anim" in line, line
     assert table.read_text() == "the user's own"
+
+
+@pytest.mark.parametrize("module, work, args, name", [
+    ("peers", "peer_table", [], "peers.md"),
+    ("preview", "preview_table", ["--no-install"], "preview.md"),
+    ("contact_cost", "_measure", [], "contact_bench.csv"),
+    ("hard", "hard_run", ["--plain"], "plain_newton.md"),
+])
+def test_other_benches_refuse_a_users_file_before_measuring(module, work, args, name,
+                                                            tmp_path, capsys, monkeypatch):
+    import importlib
+
+    bench = importlib.import_module(f"fem_anim.bench.{module}")
+    monkeypatch.setattr(bench, work, never)
+    (tmp_path / name).write_text("the user's own")
+    argv = [*args, "--out", str(tmp_path)]
+    code = main(["bench", "--hard", *argv]) if module == "hard" else bench.main(argv)
+    assert code == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert f"{tmp_path / name} was not written by fem-anim" in line, line
+    assert (tmp_path / name).read_text() == "the user's own"

@@ -368,7 +368,7 @@ MUTATIONS: list[Mutation] = [
              "    finally:\n        shutil.rmtree(staging, ignore_errors=True)",
              "    except BaseException:\n        raise",
              ("tests/test_command_safety.py::test_staged_products_leave_nothing_when_a_write_fails",
-              "tests/test_command_safety.py::test_sigint_while_rendering_leaves_the_old_pictures"),
+              "tests/test_command_safety.py::test_signal_while_rendering_leaves_the_old_pictures"),
              "a failed or interrupted write leaves its half-made staging folder behind"),
     Mutation("render-os-error-traceback", "fem_anim/render/process.py",
              "    except OSError as err:  # read-only or full file system",
@@ -403,6 +403,17 @@ MUTATIONS: list[Mutation] = [
              "            pass",
              ("tests/test_command_safety.py::test_extremes_refuses_a_users_file_before_the_cases",),
              "bench --extremes -o FILE runs every case before it finds the user's FILE"),
+    Mutation("render-sigterm-no-cleanup", "fem_anim/render/process.py",
+             "STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)",
+             "STOP_SIGNALS = (signal.SIGINT,)",
+             ("tests/test_command_safety.py::"
+              "test_signal_while_rendering_leaves_the_old_pictures",),
+             "a renderer stopped by SIGTERM leaves its staged frames behind"),
+    Mutation("bench-peers-checks-after", "fem_anim/bench/peers.py",
+             '        check_may_write(out, ["peers.md"])  # before the runs, not after\n', "",
+             ("tests/test_command_safety.py::"
+              "test_other_benches_refuse_a_users_file_before_measuring",),
+             "python -m fem_anim.bench.peers finds the user's peers.md only after its runs"),
 ]
 
 def copy_tree(dest: Path) -> None:
