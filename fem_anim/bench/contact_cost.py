@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import os
 import shutil
 import subprocess
@@ -24,7 +25,13 @@ import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["main", "pile_scene"]
+from fem_anim.errors import FemAnimError
+from fem_anim.output.products import check_may_write, write_product
+
+__all__ = ["main", "pile_scene", "PRODUCTS"]
+
+#: The files the bench writes into ``--out``.
+PRODUCTS = ("contact_bench.toml", "contact_bench.csv", "contact_bench.md")
 
 
 def pile_scene(h: float) -> str:
@@ -57,7 +64,7 @@ def _measure(h: float, steps: int, out: Path) -> None:
     comm = MPI.COMM_WORLD
     scene_path = out / "contact_bench.toml"
     if comm.rank == 0:
-        scene_path.write_text(pile_scene(h))
+        write_product(scene_path, pile_scene(h).encode())
     comm.Barrier()
     sim = Simulation(load_scene(scene_path), comm)
     ipc = sim.problem.ipc
@@ -78,10 +85,11 @@ def _measure(h: float, steps: int, out: Path) -> None:
                      "contact_s": contact, "assembly_s": stats.assembly_s,
                      "factor_s": stats.factor_s, "linear_solve_s": stats.linear_solve_s})
     if comm.rank == 0:
-        with open(out / "contact_bench.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
+        table = io.StringIO(newline="")
+        writer = csv.DictWriter(table, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+        write_product(out / "contact_bench.csv", table.getvalue().encode())
         total = {k: sum(r[k] for r in rows) for k in rows[0] if k != "step"}
         n = len(rows)
         load = os.getloadavg()[0]
@@ -96,7 +104,7 @@ def _measure(h: float, steps: int, out: Path) -> None:
         lines.append(f"| Newton iterations | {total['newton_its'] / n:.1f} | |")
         lines.append(f"| active pairs (last step) | {rows[-1]['pairs']} | |")
         text = "\n".join(lines)
-        (out / "contact_bench.md").write_text(text + "\n")
+        write_product(out / "contact_bench.md", (text + "\n").encode())
         print(text, flush=True)
 
 
@@ -109,7 +117,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="contact_bench_"))
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        check_may_write(out, PRODUCTS)
+    except FemAnimError as err:
+        print(f"fem-anim: error: {err}", file=sys.stderr)
+        return 2
     if args.ranks > 1 and not args.worker:
         mpirun = [shutil.which("mpirun") or "mpirun", "--allow-run-as-root", "-n",
                   str(args.ranks)]

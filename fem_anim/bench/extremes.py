@@ -28,8 +28,9 @@ import numpy as np
 
 from fem_anim.bench.extreme_cases import (COMPLETED, ENERGY_GROWTH_BOUND, Case, beam_scene, cases,
                                           load_case_scene, matches, sag_bound)
-from fem_anim.errors import ConvergenceError, FemAnimError, SceneError
+from fem_anim.errors import ConvergenceError, FemAnimError, SceneError, describe_os_error
 from fem_anim.mesh.checks import cell_volumes
+from fem_anim.output.products import check_may_write, write_product
 
 __all__ = ["Outcome", "run_case", "locking_rows", "mixed_locking_rows", "format_table", "main"]
 
@@ -278,6 +279,9 @@ def main(argv: list[str]) -> int:
         return 2
     quiet_jit_logging()
     try:
+        if args.output:  # before the cases, not after
+            check_may_write(Path(args.output).parent, [Path(args.output).name],
+                            MPI.COMM_WORLD)
         results = []
         for case in cases(args.full):
             try:
@@ -305,7 +309,13 @@ def main(argv: list[str]) -> int:
 
             stamp = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
             command = " ".join(["fem-anim bench --extremes", *argv])
-            Path(args.output).write_text(f"Measured {stamp} on {machine_description()}; "
-                                         f"`{command}`.\n\n{table}")
+            text = f"Measured {stamp} on {machine_description()}; `{command}`.\n\n{table}"
+            try:
+                write_product(Path(args.output), text.encode())
+            except (FemAnimError, OSError) as err:
+                message = describe_os_error(err, args.output) \
+                    if isinstance(err, OSError) else str(err)
+                print_error(f"bench --extremes: {message}")
+                return 2
     return 0 if all(matches(case.expected, out.measured) or out.measured == "not run"
                     for case, out in results) else 1

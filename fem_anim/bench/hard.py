@@ -34,6 +34,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from fem_anim.output.products import check_may_write, write_product
+
 __all__ = ["CONFIGS", "HESSIAN_MODES", "HardScene", "hard_run", "hard_scenes", "hessian_table",
            "run_case", "run_scene"]
 
@@ -95,7 +97,7 @@ def hard_run(scene_path, overrides, out: Path, log=print, h: float = HARD_ELEMEN
             "complete `fem-anim run`.\n\n"
             + md_table(["configuration", "finished", "t reached, s", "Newton its", "retries",
                         "wall s", "outcome"], body))
-    (out / "plain_newton.md").write_text(text + "\n", encoding="utf-8")
+    write_product(out / "plain_newton.md", (text + "\n").encode())
     return text
 
 
@@ -249,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.plain:
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+        check_may_write(out, ["plain_newton.md"])  # before the runs, not after
         print(hard_run(args.scene, [], out, h=args.element_size, preset=args.preset))
         return 0
     from fem_anim.console import quiet_jit_logging
@@ -257,6 +259,8 @@ def main(argv: list[str] | None = None) -> int:
 
     quiet_jit_logging()
     rank0 = MPI.COMM_WORLD.rank == 0
+    if args.output:  # before the runs, not after
+        check_may_write(Path(args.output).parent, [Path(args.output).name], MPI.COMM_WORLD)
     modes = tuple(args.modes.split(","))
     before = machine_description()
     table, _ = hessian_table(args.reduced, args.only.split(";") if args.only else None, modes,
@@ -269,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     if rank0:
         print(text)
         if args.output:
-            Path(args.output).write_text(text + "\n", encoding="utf-8")
+            write_product(Path(args.output), (text + "\n").encode())
     return 0
 
 

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fem_anim.output.products import write_product
+
 __all__ = ["OPTION_CASES", "options_table"]
 
 #: (label, preset, PETSc options, extra scene overrides, baseline label)
@@ -84,5 +86,5 @@ def options_table(scene_path, overrides, out: Path, log=print, h: float = 0.025,
             "displacement from the exact configuration's, relative to its largest value.\n\n"
             + md_table(["configuration", "tets", "dofs", "Newton its", "linear its",
                         "s/step", "speed-up", "tip dev."], body))
-    (out / "options.md").write_text(text + "\n", encoding="utf-8")
+    write_product(out / "options.md", (text + "\n").encode())
     return text

@@ -30,7 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.errors import FemAnimError
+from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.output.products import check_may_write, write_product
 
 __all__ = ["main", "peer_table", "peer_python", "PEER_VENV"]
 
@@ -188,7 +189,7 @@ def peer_table(scene_path, overrides, out: Path, log=print, sizes=PEER_SIZES,
             "model "
             "difference, its VBD run by that plus VBD's truncation at a fixed sweep count.\n\n"
             + md_table(["solver", "tets", "s/step", "ratio", "tip dev."], rows) + note)
-    (out / "peers.md").write_text(text + "\n", encoding="utf-8")
+    write_product(out / "peers.md", (text + "\n").encode())
     return text
 
 
@@ -220,11 +221,14 @@ def main(argv: list[str] | None = None) -> int:
         if not 2 <= args.steps <= 1000:
             raise FemAnimError(f"--steps: must be between 2 and 1000, got {args.steps}")
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+        check_may_write(out, ["peers.md"])  # before the runs, not after
         print(peer_table(args.scene, args.overrides, out, sizes=sizes, steps=args.steps))
         return 0
     except FemAnimError as err:
         print_error(str(err))
+        return 2
+    except OSError as err:
+        print_error(describe_os_error(err, args.out))
         return 2
 
 

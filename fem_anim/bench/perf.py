@@ -20,7 +20,9 @@ step time against the number of dofs is fitted per preset. Optional sections:
 * ``--peers``: the same beam in the numpy reference and pbatoolkit
   (:mod:`fem_anim.bench.peers`).
 
-Writes ``perf.csv``, ``perf.md`` and ``perf.png`` (and the sections' tables) to ``--out``.
+Writes ``perf.csv``, ``perf.md`` and ``perf.png`` (and the sections' tables) to ``--out``;
+a file of these names there that fem_anim did not write is refused before the sweep starts
+(:mod:`fem_anim.output.products`).
 Errors a user can cause end with one line ``fem-anim: error: ...`` and exit code 2.
 """
 
@@ -36,7 +38,8 @@ import time
 from pathlib import Path
 
 from fem_anim.console import OneLineParser
-from fem_anim.errors import FemAnimError
+from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.output.products import check_may_write
 
 __all__ = ["main", "build_parser", "run_config", "DEFAULT_SIZES", "DEFAULT_PRESETS"]
 
@@ -228,7 +231,10 @@ def main(argv: list[str] | None = None) -> int:
 
         petsc = [tok for k, v in solver_options.items() for tok in (f"-{k}", v) if tok]
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+        sections = [name for flag, name in ((args.options, "options.md"),
+                                            (args.hard, "plain_newton.md"),
+                                            (args.peers, "peers.md")) if flag]
+        check_may_write(out, [*report.PRODUCTS, *sections])  # before the sweep, not after
         log = print
         log(f"perf sweep (load {_load()}): sizes {args.sizes}, presets {args.presets}")
         rows = sweep(args, petsc, log)
@@ -239,6 +245,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     except FemAnimError as err:
         print_error(str(err))
+        return 2
+    except OSError as err:
+        print_error(describe_os_error(err))
         return 2
     except KeyboardInterrupt:
         print_error("interrupted")

@@ -32,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.errors import ConvergenceError, FemAnimError
+from fem_anim.errors import ConvergenceError, FemAnimError, describe_os_error
+from fem_anim.output.products import check_may_write, write_product
 
 __all__ = ["CONFIGS", "FLOOR", "SIZES", "VBD_SWEEPS", "compare", "main", "preview_table",
            "split_rows", "split_text", "tip_errors"]
@@ -199,7 +200,7 @@ def preview_table(out: Path, sizes=SIZES, steps: int = 60, log=print,
             "omits the log term of fem_anim's and is given lambda + mu (same rest response), "
             "so a converged pbatoolkit step would still differ slightly from the reference."
             "\n\n" + md_table(headers, rows) + note + "\n\n" + split_text(splits))
-    (out / "preview.md").write_text(text + "\n", encoding="utf-8")
+    write_product(out / "preview.md", (text + "\n").encode())
     return text
 
 
@@ -246,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
         if not 2 <= args.steps <= 1000:
             raise FemAnimError(f"--steps: must be between 2 and 1000, got {args.steps}")
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+        check_may_write(out, ["preview.md"])  # before the runs, not after
         print(preview_table(out, sizes, args.steps, sweeps=sweeps,
                             install=not args.no_install))
         return 0
@@ -254,7 +255,7 @@ def main(argv: list[str] | None = None) -> int:
         print_error(str(err))
         return 2
     except OSError as err:
-        print_error(f"{err.filename or 'output'}: {err.strerror}")
+        print_error(describe_os_error(err, args.out))
         return 2
 
 

@@ -16,8 +16,10 @@ import numpy as np
 
 from fem_anim.bench.timing import growth_exponent
 from fem_anim.bench.worker import PHASE_COLUMNS
+from fem_anim.output.products import staged_products
 
-__all__ = ["write", "exponent_text", "blas_rows", "mpi_rows", "machine_text", "md_table"]
+__all__ = ["PRODUCTS", "write", "exponent_text", "blas_rows", "mpi_rows", "machine_text",
+           "md_table"]
 
 COLUMNS = ("element_size", "preset", "ranks", "tets", "dofs", "newton_its", "linear_its",
            *PHASE_COLUMNS, "wall", "symbolic_calls", "first_step_s", "setup_s", "peak_mb")
@@ -96,7 +98,28 @@ def plot(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
+#: The files :func:`write` makes in the bench's output folder.
+PRODUCTS = ("perf.csv", "perf.md", "perf.png")
+
+
 def write(out: Path, rows: list[dict], extra: dict, load: str = "?") -> None:
+    """Write :data:`PRODUCTS` into ``out``, together, never over a file fem_anim did not write.
+
+    Args:
+        out: The output folder (:func:`fem_anim.output.products.staged_products`).
+        rows: The sweep's rows.
+        extra: The sections' Markdown, by name (empty ones are left out).
+        load: The load average to report.
+
+    Raises:
+        FemAnimError: if ``out`` holds one of :data:`PRODUCTS` that fem_anim did not write.
+        OSError: if ``out`` cannot be written (the old files stay as they were).
+    """
+    with staged_products(out, PRODUCTS) as staging:
+        _write(staging, rows, extra, load)
+
+
+def _write(out: Path, rows: list[dict], extra: dict, load: str) -> None:
     with open(out / "perf.csv", "w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
         writer.writeheader()

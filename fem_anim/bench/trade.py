@@ -18,7 +18,10 @@ vertices, evaluated in each configuration's own mesh), and at the probe point
 e_probe = max_k |u(p*, t_k) - u_ref(p*, t_k)| / max_k |u_ref(p*, t_k)|.
 Outputs in OUTDIR (default ``out/<scene>_trade``): ``trade_study.csv``,
 ``trade_study.png`` (:func:`fem_anim.bench.pareto.plot_pareto`) and ``trade_study.md``
-(the Pareto-optimal configurations: for this accuracy, use this).
+(the Pareto-optimal configurations: for this accuracy, use this). OUTDIR may hold other
+files, but not files of these names that fem_anim did not write (refused before the study
+starts, :func:`fem_anim.output.products.check_may_write`); the three are written together
+when the study ends, so an interrupted study leaves the previous ones as they were.
 """
 
 from __future__ import annotations
@@ -32,10 +35,15 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.console import OneLineParser
-from fem_anim.errors import FemAnimError, SceneError
+from fem_anim.errors import FemAnimError, SceneError, describe_os_error
+from fem_anim.output.products import check_may_write, staged_products
 from fem_anim.bench.sweep import expand_study
 
-__all__ = ["main", "build_parser", "trajectory_errors", "machine_description", "COLUMNS"]
+__all__ = ["main", "build_parser", "trajectory_errors", "machine_description", "COLUMNS",
+           "PRODUCTS"]
+
+#: The files a trade study writes into its output directory.
+PRODUCTS = ("trade_study.csv", "trade_study.png", "trade_study.md")
 
 COLUMNS = ["label", "status", "dofs", "steps", "retries", "newton_its", "linear_its",
            "mesh_s", "compile_s", "first_run_s", "wall_median_s", "wall_per_sim_s",
@@ -115,9 +123,13 @@ def _study(args) -> int:
     error = None
     if comm.rank == 0:
         try:
+            check_may_write(out, PRODUCTS)
             out.mkdir(parents=True, exist_ok=True)
+        except FemAnimError as err:
+            error = f"bench: {err}"
         except OSError as err:
-            error = f"bench: output directory {out} cannot be written: {err.strerror}"
+            error = f"bench: output directory {out} cannot be written: " \
+                    f"{describe_os_error(err, out)}"
     if (error := comm.bcast(error, root=0)):
         raise FemAnimError(error)
 
@@ -168,7 +180,12 @@ def _study(args) -> int:
              + (f"{row['wall_per_sim_s']:.3g} s/s, error {row['error_l2']:.3g}, "
                 f"compile {m.compile_s:.2f} s" if m.status == "ok" else m.status))
     if comm.rank == 0:
-        _write_outputs(out, study, rows, keys, points, probe, ref)
+        try:
+            with staged_products(out, PRODUCTS) as staging:
+                _write_outputs(staging, study, rows, keys, points, probe, ref)
+        except OSError as err:
+            raise FemAnimError(f"bench: the results cannot be written into {out}: "
+                               f"{describe_os_error(err, out)}; nothing was replaced") from None
         _say(comm, args.quiet, (out / "trade_study.md").read_text())
     return 0
 

@@ -3,7 +3,9 @@
 :mod:`~fem_anim.output.files` gathers displacements and cell values to rank 0 in input order
 and writes the trajectory (XDMF + HDF5), ``stats.csv``, ``final.vtu`` and ``scene.json``
 through a staging area; :mod:`~fem_anim.output.rundir` marks, locks and installs a run
-directory so fem_anim only ever replaces files it wrote; :mod:`~fem_anim.output.provenance`
+directory so fem_anim only ever replaces files it wrote, and
+:mod:`~fem_anim.output.products` keeps that promise for every other command writing into
+a folder a user names; :mod:`~fem_anim.output.provenance`
 records the software stack and the wall time per phase for ``summary.json``. Public names
 load lazily.
 """
@@ -33,4 +35,9 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "install": "rundir",
     "read_manifest": "rundir",
     "write_manifest": "rundir",
+    "foreign_files": "rundir",
+    "STAGING_PREFIX": "products",
+    "check_may_write": "products",
+    "staged_products": "products",
+    "write_product": "products",
 })

@@ -22,6 +22,7 @@ collective.
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import os
@@ -30,7 +31,8 @@ from pathlib import Path
 from fem_anim.errors import FemAnimError, describe_os_error
 
 __all__ = ["MARKER", "LOCK", "STAGING", "claim", "check_not_in_use", "install",
-           "read_manifest", "write_manifest", "write_atomically", "RENDER_PRODUCTS"]
+           "read_manifest", "write_manifest", "write_atomically", "foreign_files",
+           "RENDER_PRODUCTS"]
 
 MARKER = ".fem_anim-run"
 LOCK = ".fem_anim-lock"
@@ -79,6 +81,25 @@ def read_manifest(path: Path) -> set[str]:
         return set(json.loads((Path(path) / MARKER).read_text()).get("files", []))
     except (OSError, ValueError, AttributeError):
         return set()
+
+
+def foreign_files(path: Path, names) -> list[str]:
+    """The files among ``names`` that exist in ``path`` but fem_anim did not write there.
+
+    Args:
+        path: A folder (missing: nothing is foreign).
+        names: Relative POSIX paths.
+
+    Returns:
+        Those of ``names`` present in ``path`` (as a file, folder or link) and absent
+        from its manifest, sorted.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        return []
+    owned = read_manifest(path)
+    return [name for name in sorted(set(names)) if name not in owned
+            and ((path / name).exists() or (path / name).is_symlink())]
 
 
 def write_manifest(path: Path, files: set[str]) -> None:
@@ -170,11 +191,20 @@ def install(staging: Path, path: Path, replaces: set[str] | None = None) -> None
         staging: A folder inside ``path`` holding the new files.
         path: The run directory.
         replaces: Manifest entries the new files supersede (default: none).
+
+    Raises:
+        FileExistsError: before anything is moved, naming a file of ``path`` that one of
+            the new files would replace but that the manifest does not list (a user's).
     """
     owned = read_manifest(path)
     new: set[str] = set()
     for item in sorted(staging.iterdir()):
         new |= _files_below(item)
+    foreign = foreign_files(path, new)
+    if foreign:  # checked before anything moves: nothing is replaced, nothing is lost
+        raise FileExistsError(errno.EEXIST, "exists and was not written by fem-anim (it is "
+                              f"not in {MARKER}); nothing was replaced",
+                              str(path / foreign[0]))
     for name in sorted(new):
         target = path / name
         target.parent.mkdir(parents=True, exist_ok=True)

@@ -13,14 +13,16 @@ neither colours nor framing jump between frames, renders every frame with one
 * ``animation.mp4`` (H.264 through the ffmpeg binary of imageio-ffmpeg),
 * ``final.png`` (the last frame) and the plots of :mod:`fem_anim.render.plots`.
 
-Everything is written into ``OUTDIR/.rendering`` and moved into place at the end. Runs in
+Everything is written into a fresh staging folder inside ``OUTDIR`` and moved into place
+at the end (:func:`fem_anim.output.products.staged_products`): a directory holding a file
+of one of these names that fem_anim did not write is refused before anything is rendered,
+and an interrupted rendering leaves the previous pictures as they were. Runs in
 the rendering process only (see :mod:`fem_anim.render.process`), never beside DOLFINx.
 """
 
 from __future__ import annotations
 
 import math
-import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,11 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.errors import FemAnimError
-from fem_anim.output.rundir import install, read_manifest
+from fem_anim.output.products import staged_products
+from fem_anim.output.rundir import read_manifest
 from fem_anim.render.frames import FrameRenderer, body_labels
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
-           "render_directory", "REQUIRED_FILES", "MAX_GIF_FPS"]
+           "render_directory", "product_names", "REQUIRED_FILES", "MAX_GIF_FPS"]
 
 #: What a finished run directory holds before it is rendered.
 REQUIRED_FILES = ("trajectory.xdmf", "trajectory.h5", "stats.csv")
@@ -167,6 +170,30 @@ def _even(image: np.ndarray) -> np.ndarray:
     return np.pad(image, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
 
 
+def _frame_name(k: int, last: int) -> str:
+    return f"frame_{k:0{max(4, len(str(last)))}d}.png"
+
+
+def product_names(run: RunFrames, settings: dict) -> set[str]:
+    """The files a rendering of ``run`` writes into its directory.
+
+    Args:
+        run: The trajectory.
+        settings: The scene's ``[render]`` table (its ``outputs``).
+
+    Returns:
+        Relative POSIX paths: ``final.png``, the two plots, and the frames, GIF and MP4
+        that ``render.outputs`` asks for.
+    """
+    outputs = set(settings["outputs"])
+    last = run.times.size - 1
+    names = {"final.png", "energies.png", "newton.png"}
+    if "frames" in outputs:
+        names |= {f"frames/{_frame_name(k, last)}" for k in range(last + 1)}
+    names |= {f"animation.{kind}" for kind in ("gif", "mp4") if kind in outputs}
+    return names
+
+
 def render_directory(path: Path, settings: dict) -> dict:
     """Render the run in a directory: frames, animations, ``final.png`` and the plots.
 
@@ -178,22 +205,19 @@ def render_directory(path: Path, settings: dict) -> dict:
         What was made: ``frames`` rendered, ``seconds_per_frame``, ``fps``, ``gif_frames``.
 
     Raises:
-        FemAnimError: for a directory that is not a finished run, or a field it lacks.
+        FemAnimError: for a directory that is not a finished run, a field it lacks, or
+            a file of one of :func:`product_names` in it that fem_anim did not write.
+        OSError: if the directory cannot be written (nothing of it is replaced).
     """
     from fem_anim.render.plots import write_plots
 
     path = Path(path)
     check_run_directory(path)
     run = read_run(path)
-    staging = path / ".rendering"
-    shutil.rmtree(staging, ignore_errors=True)
-    staging.mkdir()
-    try:
+    names = product_names(run, settings)
+    with staged_products(path, names, replaces=_replaced(path, names)) as staging:
         made = _render_frames(run, settings, staging, _run_name(path), _obstacles(path))
         write_plots(path / "stats.csv", staging)
-        _move_into_place(staging, path)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
     print(f"rendered {made['frames']} frames ({made['seconds_per_frame']:.3f} s per frame, "
           f"{made['size']} pixels, {made['fps']:.4g} frames/s) into {path}", flush=True)
     return made
@@ -230,7 +254,6 @@ def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
     outputs = set(settings["outputs"])
     last = run.times.size - 1
     order = range(last + 1) if outputs else [last]  # no outputs: final.png only
-    width = max(4, len(str(last)))
     if "frames" in outputs:
         (staging / "frames").mkdir()
     renderer = FrameRenderer(run.points, run.cells, settings, clim, _bounds(run), obstacles)
@@ -241,7 +264,7 @@ def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
             image = renderer.render(run.displacement[k], values[k],
                                     f"{name}  t = {run.times[k]:.3f} s")
             if "frames" in outputs:
-                iio.imwrite(staging / "frames" / f"frame_{k:0{width}d}.png", image)
+                iio.imwrite(staging / "frames" / _frame_name(k, last), image)
             if "gif" in outputs and k % stride == 0:
                 gif.append(image)
             if "mp4" in outputs:
@@ -296,11 +319,9 @@ def _run_name(path: Path) -> str:
         return path.resolve().name
 
 
-def _move_into_place(staging: Path, path: Path) -> None:
-    """Replace the run's old pictures by the new ones (each rename atomic). Only what this
-    rendering made again is replaced (``frames/`` as a whole, when it made frames: an older
-    rendering's surplus frames go); a user's own files (notes in ``frames/``) are kept
-    (:func:`fem_anim.output.rundir.install`)."""
-    made = {item.name for item in staging.iterdir()}
-    old = {name for name in read_manifest(path) if name.split("/")[0] in made}
-    install(staging, path, replaces=old)
+def _replaced(path: Path, names: set[str]) -> set[str]:
+    """The old pictures a rendering replaces: the manifest's files under the top-level names
+    it writes (``frames/`` as a whole, when it makes frames: an older rendering's surplus
+    frames go); a user's own files (notes in ``frames/``) are not in the manifest and stay."""
+    made = {name.split("/")[0] for name in names}
+    return {name for name in read_manifest(path) if name.split("/")[0] in made}

@@ -6,6 +6,12 @@ a PNG: :func:`fem_anim.render.frames.render_vtu`) start ``python -m fem_anim.ren
 the VTK wheel's C++ runtime clashes with libraries DOLFINx loads (std::regex in VTK's scalar
 bar aborts in a process that has imported dolfinx), and a separate process also lets a
 saved run be re-rendered without simulating again (``fem-anim render OUTDIR``).
+
+The process reports every error a user or the system can cause (a folder holding files
+fem_anim did not write, a read-only or full file system) as one ``fem-anim: error:`` line
+and exit code 2, an interrupt with exit code 130; its caller raises them again as
+:class:`~fem_anim.errors.FemAnimError` and :class:`~fem_anim.errors.Interrupted`. An
+interrupted rendering installs nothing (:mod:`fem_anim.output.products`).
 """
 
 from __future__ import annotations
@@ -13,15 +19,19 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
 
-from fem_anim.errors import FemAnimError
+from fem_anim.errors import FemAnimError, Interrupted, describe_os_error
 from fem_anim.render.animation import render_directory
 from fem_anim.render.frames import render_vtu
 
-__all__ = ["render_file", "render_run"]
+__all__ = ["render_file", "render_run", "STOP_SIGNALS"]
+
+#: Signals that stop a rendering: it removes its staged files and installs nothing.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
@@ -29,16 +39,36 @@ def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
 
     Raises:
         FemAnimError: the renderer's one-line message, if it rejected its input (exit 2).
+        Interrupted: if a signal stopped the renderer or this process while it rendered
+            (the renderer is given SIGINT and the time to remove its staged files).
         RuntimeError: with the renderer's error output if it failed otherwise.
     """
     env = dict(os.environ)
     for key in [k for k in env if k.startswith(("OMPI_", "PMIX_", "PMI_"))]:
         del env[key]  # the renderer is not part of the MPI job
-    proc = subprocess.run([sys.executable, "-m", "fem_anim.render.process", *args],
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    child = subprocess.Popen([sys.executable, "-m", "fem_anim.render.process", *args],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env=env)
+    try:
+        stdout, stderr = child.communicate()
+    except KeyboardInterrupt:
+        child.send_signal(signal.SIGINT)  # let it clean up (it may have had one already)
+        try:
+            child.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+        raise Interrupted("rendering interrupted; nothing was installed, the previous "
+                          "pictures are as they were", signal.SIGINT) from None
+    proc = subprocess.CompletedProcess(child.args, child.returncode, stdout, stderr)
     message = proc.stderr.strip()
-    if proc.returncode == 2 and message.startswith("fem-anim: error: "):
-        raise FemAnimError(message.splitlines()[-1].removeprefix("fem-anim: error: "))
+    last = message.splitlines()[-1] if message else ""  # after ffmpeg's own complaints
+    if proc.returncode == 2 and last.startswith("fem-anim: error: "):
+        raise FemAnimError(last.removeprefix("fem-anim: error: "))
+    if proc.returncode < 0 or proc.returncode - 128 in STOP_SIGNALS:
+        signum = -proc.returncode if proc.returncode < 0 else proc.returncode - 128
+        raise Interrupted(f"rendering stopped by signal {signum}; the previous pictures "
+                          "are as they were", signum)
     if proc.returncode != 0:
         last = message.splitlines()[-1] if message else f"exit code {proc.returncode}"
         raise RuntimeError(f"rendering failed: {last}")
@@ -75,7 +105,9 @@ def render_run(path: Path, settings: dict, quiet: bool = True) -> None:
         quiet: Do not print the renderer's summary line.
 
     Raises:
-        FemAnimError: naming what is missing or wrong in ``path``.
+        FemAnimError: naming what is missing or wrong in ``path``, a file there that
+            fem_anim did not write, or an OS error (read-only or full file system).
+        Interrupted: if a signal stopped the rendering (nothing was installed).
         RuntimeError: if rendering failed otherwise.
     """
     proc = _run_renderer(["--run", str(path), "--settings", json.dumps(settings)])
@@ -90,7 +122,8 @@ def main(argv: list[str] | None = None) -> int:
         argv: The command line after the program name (default: ``sys.argv[1:]``).
 
     Returns:
-        The exit status: 0, or 2 with a one-line ``fem-anim: error:`` message on stderr.
+        The exit status: 0; 2 with a one-line ``fem-anim: error:`` message on stderr for
+        bad input or an OS error; 130 if interrupted (nothing installed).
     """
     parser = argparse.ArgumentParser(prog="python -m fem_anim.render.process")
     parser.add_argument("files", nargs="*", metavar="VTU PNG")
@@ -99,6 +132,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--settings", default="{}", help="the [render] table as JSON")
     args = parser.parse_args(argv)
     settings = json.loads(args.settings)
+    stopped: dict[str, int] = {}
+
+    def stop(signum, frame):  # SIGTERM and SIGHUP clean up like Ctrl-C
+        for sig in STOP_SIGNALS:  # a second signal must not cut the clean-up short
+            signal.signal(sig, signal.SIG_IGN)
+        stopped["signum"] = signum
+        raise KeyboardInterrupt
+
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, stop)
     try:
         if args.run:
             render_directory(Path(args.run), settings)
@@ -109,6 +152,15 @@ def main(argv: list[str] | None = None) -> int:
     except FemAnimError as err:
         print(f"fem-anim: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # read-only or full file system: the file and why
+        target = args.run or args.files[-1]
+        print(f"fem-anim: error: cannot write the pictures of {target}: "
+              f"{describe_os_error(err, target)}; nothing was replaced", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fem-anim: error: rendering interrupted; nothing was installed",
+              file=sys.stderr)
+        return 128 + stopped.get("signum", signal.SIGINT)
     return 0
 
 

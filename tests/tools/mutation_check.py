@@ -341,8 +341,80 @@ MUTATIONS: list[Mutation] = [
              "            total",
              ("tests/test_reference_comparison.py::test_step_objective",),
              "the inertia term's value taken at x + y instead of x - y"),
+    # -- every command keeps run's promise: its own files only, one line, nothing half-made ------
+    Mutation("lock-keeps-stale-digits", "fem_anim/output/rundir.py",
+             "    os.ftruncate(fd, 0)\n", "",
+             ("tests/test_command_safety.py::test_lock_holds_exactly_the_current_pid",),
+             "the lock file rewritten in place: a shorter pid keeps the old one's last digits"),
+    Mutation("foreign-files-none", "fem_anim/output/rundir.py",
+             "and ((path / name).exists() or (path / name).is_symlink())]",
+             "and (path / name).is_symlink()]",
+             ("tests/test_command_safety.py::"
+              "test_render_refuses_a_users_folder_holding_a_trajectory",
+              "tests/test_command_safety.py::"
+              "test_trade_study_refuses_a_users_file_before_measuring"),
+             "a user's file of a product's name not seen: render and bench write over it"),
+    Mutation("manifest-not-consulted", "fem_anim/output/rundir.py",
+             "    return [name for name in sorted(set(names)) if name not in owned\n",
+             "    return [name for name in sorted(set(names)) if owned is not None\n",
+             ("tests/test_command_safety.py::"
+              "test_render_into_a_users_folder_writes_only_its_own_names",),
+             "fem_anim's own files (in the manifest) refused too: a second rendering fails"),
+    Mutation("install-unchecked", "fem_anim/output/rundir.py",
+             "    if foreign:  # checked before anything moves", "    if False:  # checked",
+             ("tests/test_command_safety.py::test_install_refuses_to_replace_an_unlisted_file",),
+             "install renames over a file the manifest does not list (a user's)"),
+    Mutation("staging-kept-on-error", "fem_anim/output/products.py",
+             "    finally:\n        shutil.rmtree(staging, ignore_errors=True)",
+             "    except BaseException:\n        raise",
+             ("tests/test_command_safety.py::test_staged_products_leave_nothing_when_a_write_fails",
+              "tests/test_command_safety.py::test_signal_while_rendering_leaves_the_old_pictures"),
+             "a failed or interrupted write leaves its half-made staging folder behind"),
+    Mutation("render-os-error-traceback", "fem_anim/render/process.py",
+             "    except OSError as err:  # read-only or full file system",
+             "    except ZeroDivisionError as err:  # read-only or full file system",
+             ("tests/test_command_safety.py::test_render_on_a_read_only_file_system_is_one_line",),
+             "an OS error in the render process is a traceback and exit 1"),
+    Mutation("render-ffmpeg-line-taken", "fem_anim/render/process.py",
+             'last = message.splitlines()[-1] if message else ""',
+             'last = message.splitlines()[0] if message else ""',
+             ("tests/test_command_safety.py::"
+              "test_render_on_a_full_disk_is_one_line_and_installs_nothing",),
+             "the renderer's error read from its first stderr line (ffmpeg's), not its own"),
+    Mutation("trade-checks-after-the-study", "fem_anim/bench/trade.py",
+             "            check_may_write(out, PRODUCTS)\n", "",
+             ("tests/test_command_safety.py::"
+              "test_trade_study_refuses_a_users_file_before_measuring",),
+             "a user's trade_study.md found only after the whole study has run"),
+    Mutation("trade-writes-in-place", "fem_anim/bench/trade.py",
+             "                _write_outputs(staging, study,",
+             "                _write_outputs(out, study,",
+             ("tests/test_command_safety.py::"
+              "test_trade_study_writes_beside_users_files_and_replaces_its_own",),
+             "the study's files written in place: a full disk leaves a half-replaced study"),
+    Mutation("perf-checks-after-the-sweep", "fem_anim/bench/perf.py",
+             "        check_may_write(out, [*report.PRODUCTS, *sections])", "        pass",
+             ("tests/test_command_safety.py::"
+              "test_perf_bench_refuses_a_users_file_before_the_sweep",),
+             "a user's perf.md found only after hours of measurements"),
+    Mutation("extremes-overwrites", "fem_anim/bench/extremes.py",
+             "            check_may_write(Path(args.output).parent, [Path(args.output).name],\n"
+             "                            MPI.COMM_WORLD)",
+             "            pass",
+             ("tests/test_command_safety.py::test_extremes_refuses_a_users_file_before_the_cases",),
+             "bench --extremes -o FILE runs every case before it finds the user's FILE"),
+    Mutation("render-sigterm-no-cleanup", "fem_anim/render/process.py",
+             "STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)",
+             "STOP_SIGNALS = (signal.SIGINT,)",
+             ("tests/test_command_safety.py::"
+              "test_signal_while_rendering_leaves_the_old_pictures",),
+             "a renderer stopped by SIGTERM leaves its staged frames behind"),
+    Mutation("bench-peers-checks-after", "fem_anim/bench/peers.py",
+             '        check_may_write(out, ["peers.md"])  # before the runs, not after\n', "",
+             ("tests/test_command_safety.py::"
+              "test_other_benches_refuse_a_users_file_before_measuring",),
+             "python -m fem_anim.bench.peers finds the user's peers.md only after its runs"),
 ]
-
 
 def copy_tree(dest: Path) -> None:
     """Copy the repository's working files (tracked + untracked, not ignored) into ``dest``.
