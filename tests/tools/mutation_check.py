@@ -69,6 +69,10 @@ IND = "tests/test_independent_checks.py"
 CONTACT = "tests/test_contact.py"
 REF = "tests/test_reference_comparison.py"
 MODES = "tests/test_hessian_modes.py"
+TR_RESET = ("tests/test_trust_region_step_reset.py::"
+            "test_a_step_after_a_trust_region_is_a_fresh_minimisers_step")
+SCHUR = ("tests/test_schur_preconditioner.py::"
+         "test_schur_complement_against_its_preconditioner")
 BODY_MOTION = "tests/test_per_body_momentum.py::test_each_body_moves_rigidly_about_its_own_centre"
 
 MUTATIONS: list[Mutation] = [
@@ -410,6 +414,35 @@ MUTATIONS: list[Mutation] = [
               "test_bodies_of_several_models_keep_the_exact_hessian",),
              "preview reads the material model of the top level only: on [[body]] scenes of "
              "several models auto filters one model's tangent for all"),
+    Mutation("trust-radius-carried-over", "fem_anim/solver/hessian_choice.py",
+             "        self._radius = None\n        self._longest = 0.0\n",
+             "        self._longest = 0.0\n",
+             (TR_RESET,),
+             "the trust radius of one step's end carried into the next step"),
+    Mutation("cg-indefinite-carried-over", "fem_anim/solver/hessian_choice.py",
+             "        self._indefinite_seen = False\n        self.leave_trust_region()\n",
+             "        self.leave_trust_region()\n",
+             (TR_RESET,),
+             "CG's indefiniteness of one step remembered in the next: the next step "
+             "preconditioned by the shifted ICC copy and stepped in a trust region at once"),
+    Mutation("schur-preconditioner-sign", "fem_anim/problem/mixed_space.py",
+             "self.matrix.scale(-weight * self.scale)", "self.matrix.scale(weight * self.scale)",
+             (SCHUR,),
+             "the Schur preconditioner of the wrong sign (FGMRES still converges, slower)"),
+    Mutation("schur-preconditioner-stale", "fem_anim/problem/mixed_space.py",
+             "        self.mass.copy(self.matrix)\n", "",
+             (SCHUR,),
+             "each update rescales the last step's preconditioner instead of the pressure mass"),
+    Mutation("schur-preconditioner-no-mu", "fem_anim/problem/objective.py",
+             "mu_value * (1.0 + mu_value * inv_kappa))", "(1.0 + mu_value * inv_kappa))",
+             (SCHUR,),
+             "the Schur preconditioner's scale without the shear modulus"),
+    Mutation("mixed-quadrature-one-low", "fem_anim/problem/discretisation.py",
+             "max(self.quadrature_degree, 1 + d * (degree - 1))",
+             "max(self.quadrature_degree, d * (degree - 1))",
+             ("tests/test_quadrature_exactness.py::"
+              "test_constraint_of_every_pressure_test_function_is_exact",),
+             "the mixed rule one degree low: exact for q = 1 (the volume), not for other q"),
 ]
 
 
