@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mpi4py import MPI
+from scipy.spatial.transform import Rotation
 from test_analytic import scipy_matrix
 
 from fem_anim import compat
@@ -57,8 +58,6 @@ def closed_form(k: int):
     mass = DENSITY[k] * a * b * c
     inertia = mass / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
     if k == 1:
-        from scipy.spatial.transform import Rotation
-
         R = Rotation.from_euler("xyz", ROTATION, degrees=True).as_matrix()
         inertia = R @ inertia @ R.T
     return mass, np.asarray(OFFSETS[k]), inertia

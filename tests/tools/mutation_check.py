@@ -443,6 +443,18 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_quadrature_exactness.py::"
               "test_constraint_of_every_pressure_test_function_is_exact",),
              "the mixed rule one degree low: exact for q = 1 (the volume), not for other q"),
+    Mutation("reported-obstacle-energy-with-friction", "fem_anim/problem/energy_terms.py",
+             'ufl_forms["contact"] = self.contact.energy',
+             'ufl_forms["contact"] = self.contact.energy + self.contact.friction',
+             ("tests/test_contact_energy_report.py::"
+              "test_reported_contact_energy_is_the_barrier_of_the_written_positions",),
+             "the obstacles' lagged friction potential reported as stored contact energy"),
+    Mutation("reported-ipc-energy-with-friction", "fem_anim/problem/reported_energies.py",
+             'values["contact"] += self.ipc.energy(friction=False)',
+             'values["contact"] += self.ipc.energy(friction=True)',
+             ("tests/test_contact_energy_report.py::"
+              "test_reported_ipc_energy_is_ipctks_barrier_of_the_written_positions",),
+             "the lagged friction potential between bodies reported as stored contact energy"),
 ]
 
 
