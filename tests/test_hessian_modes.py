@@ -24,6 +24,7 @@ from fem_anim.solver.hessian_choice import cg_probe
 from fem_anim.scene import load_scene
 from fem_anim.simulation.loop import Simulation
 from fem_anim.solver.hessian_choice import HESSIAN_KINDS
+from fem_anim.solver.stopping import CONVERGED_REASONS
 
 
 def _kinds(stats) -> dict:
@@ -449,10 +450,16 @@ def test_default_scene_3000_steps_coarse():
 @pytest.mark.mpi
 @pytest.mark.parametrize("hessian", ["trust_region_filter", "auto"])  # the first: clamp and abs
 def test_mpi_equals_serial(tmp_path, hessian):
-    """The coarse default beam at dt = 0.05 s (6 steps) under ``mpirun -n 2``: the serial
-    energies to 1e-8. auto (exact here: MUMPS's inertia shows no negative pivot on either) takes the
-    same iterations; abs and the trust-region filter converge linearly (the beam's tangent
-    is indefinite at many points), so round-off may move their last iteration by one or two.
+    """The coarse default beam at dt = 0.05 s (6 steps) under ``mpirun -n 2``: every step of
+    both runs meets its stopping test, the energies equal the serial ones to 1e-8, and each
+    iteration of auto is exact on both (MUMPS's inertia shows no negative pivot on either).
+
+    Iteration counts are compared only within a measured slack, since the count is not
+    what is checked: the two runs sum in different orders, and a step whose residual lands
+    near the relative test after its third iteration takes a fourth (or a fifth) on one of
+    them (measured at step 6 under load, auto: 5 serial against 4 on 2 ranks; idle: 4 and 4).
+    abs and the trust-region filter converge linearly (the beam's tangent is indefinite at
+    many points), so round-off may move their last iteration by one or two.
 
     (The crushed cube itself fails under MPI with every mode, exact included: reported.)
     """
@@ -470,9 +477,11 @@ def test_mpi_equals_serial(tmp_path, hessian):
         assert r.returncode == 0, r.stderr
     a, b = read_stats(out[1] / "stats.csv"), read_stats(out[2] / "stats.csv")
     assert len(a) == len(b) == 6
-    slack = 0 if hessian == "auto" else 2
+    slack = 1 if hessian == "auto" else 2
     for ra, rb in zip(a, b):
         assert rb["retries"] == ra["retries"] == 0
+        for r in (ra, rb):
+            assert r["snes_reason"] in CONVERGED_REASONS and r["residual_ratio"] <= 1.0, r
         assert abs(rb["newton_its"] - ra["newton_its"]) <= slack, ra["step"]
         for key in HESSIAN_KINDS:
             assert (rb[f"{key}_its"] > 0) == (ra[f"{key}_its"] > 0), (ra["step"], key)

@@ -36,11 +36,25 @@ OPTIONS = {  # name -> solver keys
 }
 
 
+#: Steps run per option. Plain ``rest`` converges linearly (the rest Hessian far from the
+#: current state) and its round-off floor of g rises step by step; measured (Debian 12,
+#: snes_rtol lowered until the step ends at the floor): the floor lies at 2e-10 of the first
+#: residual at step 2 (50 x below the test's 1e-8) but at 6e-9 at step 3 (1.4 x below it: 26
+#: iterations, and a perturbation of round-off, e.g. another MUMPS pivot order, turns its
+#: end into reason 6). ``rest`` is therefore compared after 2 steps, the others after 3
+#: (rest with L-BFGS converges to 1e-9 at step 3).
+STEPS_OF = dict.fromkeys(OPTIONS, STEPS) | {"rest": 2}
+
+
 @pytest.fixture(scope="module")
 def exact(tmp_path_factory):
-    sim = Simulation(falling_bar(tmp_path_factory.mktemp("exact"), name="exact"),
-                     MPI.COMM_WORLD)
-    return run_rows(sim, STEPS)
+    """Exact Newton's (final state, rows) after n steps, n of :data:`STEPS_OF`."""
+    runs = {}
+    for steps in sorted(set(STEPS_OF.values())):
+        sim = Simulation(falling_bar(tmp_path_factory.mktemp("exact"), name="exact"),
+                         MPI.COMM_WORLD)
+        runs[steps] = run_rows(sim, steps)
+    return runs
 
 
 def total(rows, key):
@@ -49,10 +63,11 @@ def total(rows, key):
 
 @pytest.mark.parametrize("name", OPTIONS)
 def test_kept_hessian_reaches_exact_newtons_answer(tmp_path, exact, name):
-    exact_state, exact_rows = exact
+    steps = STEPS_OF[name]
+    exact_state, exact_rows = exact[steps]
     sim = Simulation(falling_bar(tmp_path, name=name, **OPTIONS[name]), MPI.COMM_WORLD)
-    state, rows = run_rows(sim, STEPS)
-    assert len(rows) == STEPS and total(rows, "retries") == 0
+    state, rows = run_rows(sim, steps)
+    assert len(rows) == steps and total(rows, "retries") == 0
     assert all(r["snes_reason"] in CONVERGED_REASONS for r in rows)
     assert all(r["residual_ratio"] <= 1.0 for r in rows)  # exact Newton's test
     err = np.linalg.norm(state.u - exact_state.u) / np.linalg.norm(exact_state.u)

@@ -181,24 +181,29 @@ def test_interrupted_mpi_run_leaves_a_resumable_directory(tmp_path):
 # -- 3. one run per directory -------------------------------------------------------------------
 def test_second_concurrent_run_is_refused_and_a_stale_lock_recovered(tmp_path):
     out = tmp_path / "run"
-    # 600 coarse steps: the first run must outlive the second's start-up (200 steps raced
-    # it on Debian 13 at load ~4: the first had finished when the second was refused)
-    args = ["run", "-q", *COARSE, "--set", "time.steps=600", "--set",
+    args = ["run", "-q", *COARSE, "--set", "time.steps=40", "--set",
             "output.checkpoint_every=5", "-o", str(out)]
     first = start(args)
     wait_for_rows(out, 12, first)
-    second = fem_anim(args)
-    assert second.returncode == 2
-    line = one_error_line(second.stderr)
-    assert f"{out} is in use by another fem-anim run (pid {first.pid})" in line
-    assert first.poll() is None and (out / ".partial" / "stats.csv").exists()
-    os.killpg(first.pid, signal.SIGKILL)  # dies holding the lock
-    first.wait()
-    assert (out / LOCK).read_text().strip() == str(first.pid)  # a stale lock file
-    resumed = fem_anim(["run", "-q", *COARSE, "--set", "time.steps=600", "--set",
-                        "output.checkpoint_every=5", "--resume", str(out)])
-    assert resumed.returncode == 0, resumed.stderr
-    assert frames(out / "trajectory.xdmf") == 601
+    # stopped (not ended) while it holds the lock: however slow the second's start-up on a
+    # loaded machine, the first cannot finish and release the directory before it
+    os.killpg(first.pid, signal.SIGSTOP)
+    try:
+        second = fem_anim(args)
+        assert second.returncode == 2
+        line = one_error_line(second.stderr)
+        assert f"{out} is in use by another fem-anim run (pid {first.pid})" in line
+        assert first.poll() is None and (out / ".partial" / "stats.csv").exists()
+    finally:
+        os.killpg(first.pid, signal.SIGKILL)  # dies holding the lock
+        first.wait()
+    assert (out / LOCK).read_text() == f"{first.pid}\n"  # a stale lock file
+    resumed = start(["run", "-q", *COARSE, "--set", "time.steps=40", "--set",
+                     "output.checkpoint_every=5", "--resume", str(out)])
+    stdout, stderr = resumed.communicate(timeout=300)
+    assert resumed.returncode == 0, stderr
+    assert (out / LOCK).read_text() == f"{resumed.pid}\n"  # the stale pid replaced
+    assert frames(out / "trajectory.xdmf") == 41
 
 
 # -- 1. only fem_anim's own files ------------------------------------------------------------

@@ -69,6 +69,11 @@ IND = "tests/test_independent_checks.py"
 CONTACT = "tests/test_contact.py"
 REF = "tests/test_reference_comparison.py"
 MODES = "tests/test_hessian_modes.py"
+TR_RESET = ("tests/test_trust_region_step_reset.py::"
+            "test_a_step_after_a_trust_region_is_a_fresh_minimisers_step")
+SCHUR = ("tests/test_schur_preconditioner.py::"
+         "test_schur_complement_against_its_preconditioner")
+BODY_MOTION = "tests/test_per_body_momentum.py::test_each_body_moves_rigidly_about_its_own_centre"
 
 MUTATIONS: list[Mutation] = [
     # -- six bugs the independent checks were written to catch --------------------------------
@@ -414,6 +419,115 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_command_safety.py::"
               "test_other_benches_refuse_a_users_file_before_measuring",),
              "python -m fem_anim.bench.peers finds the user's peers.md only after its runs"),
+    # -- contracts checked independently: placement, per-body motion, energy report, lock,
+    #    intersection check, solver modes on [[body]] scenes, the trust region's per-step state
+    Mutation("body-rotation-order", "fem_anim/mesh/bodies.py",
+             "return Rz @ Ry @ Rx", "return Rx @ Ry @ Rz",
+             ("tests/test_body_placement.py::test_rotation_matrix_is_scipys_extrinsic_xyz",),
+             "the body turned about z first, then y, then x (same for one axis alone)"),
+    Mutation("body-ry-sign", "fem_anim/mesh/bodies.py",
+             "Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])",
+             "Ry = np.array([[cy, 0, -sy], [0, 1, 0], [sy, 0, cy]])",
+             ("tests/test_body_placement.py::test_rotation_matrix_is_scipys_extrinsic_xyz",),
+             "the rotation about y turned the wrong way"),
+    Mutation("body-placement-untransposed", "fem_anim/mesh/bodies.py",
+             'points @ rotation_matrix(body["rotation"], d).T + offset',
+             'points @ rotation_matrix(body["rotation"], d) + offset',
+             ("tests/test_body_placement.py::test_placed_vertices_of_a_turned_body",),
+             "the placed vertices turned by R^T (the inverse rotation) instead of R"),
+    Mutation("initial-centre-of-the-scene", "fem_anim/simulation/initial_state.py",
+             "center = center_of_mass(problem, body) if",
+             "center = center_of_mass(problem) if",
+             (BODY_MOTION,),
+             "a body spins about the whole scene's centre of mass instead of its own"),
+    Mutation("initial-omega-cross-order", "fem_anim/simulation/initial_state.py",
+             "return v + np.cross(np.asarray(omega, dtype=float), r)",
+             "return v + np.cross(r, np.asarray(omega, dtype=float))",
+             (BODY_MOTION,),
+             "r x omega for omega x r: the body spins backwards (same kinetic energy)"),
+    Mutation("initial-first-body-dofs", "fem_anim/simulation/initial_state.py",
+             "cells = np.flatnonzero(problem.cell_body == body).astype(np.int32)",
+             "cells = np.flatnonzero(problem.cell_body == 0).astype(np.int32)",
+             (BODY_MOTION,),
+             "every body's initial velocity written onto the first body's dofs"),
+    Mutation("report-gain-conservative-only", "fem_anim/simulation/energy_report.py",
+             "gained = not moving and drift", "gained = conservative and drift",
+             ("tests/test_energy_report_classes.py::"
+              "test_a_gain_is_flagged_for_every_scene_without_moving_pins",),
+             "an energy gain of a damped or frictional scene left unflagged"),
+    Mutation("report-loss-flagged-when-damped", "fem_anim/simulation/energy_report.py",
+             "damped = conservative and drift is not None",
+             "damped = not moving and drift is not None",
+             ("tests/test_energy_report_classes.py::"
+              "test_a_loss_is_flagged_only_for_a_conservative_scene",),
+             "the loss of a damped or frictional scene flagged as numerical damping"),
+    Mutation("report-turning-pin-still", "fem_anim/simulation/energy_report.py",
+             'return any(p["velocity"] is not None or p["angular_velocity"] != 0',
+             'return any(p["velocity"] is not None and p["angular_velocity"] != 0',
+             ("tests/test_energy_report_classes.py::test_a_turning_handle_is_a_moving_pin",),
+             "a handle that only turns counted as a still pin: its work flagged as a gain"),
+    Mutation("lock-stale-tail-kept", "fem_anim/output/rundir.py",
+             "os.ftruncate(fd, 0)", "os.lseek(fd, 0, os.SEEK_SET)",
+             ("tests/test_lock_file.py::test_a_stale_lock_of_a_longer_pid_is_replaced_by_ours",),
+             "the lock file not truncated: a shorter pid leaves the stale pid's tail"),
+    Mutation("intersection-rest-positions", "fem_anim/contact/intersection.py",
+             "ipctk.has_intersections(mesh, np.asfortranarray(rest + u[used]))",
+             "ipctk.has_intersections(mesh, np.asfortranarray(rest))",
+             ("tests/test_intersection_check.py::"
+              "test_a_planted_crossing_is_found_and_only_there",),
+             "the check looks at the rest positions, not the frame's: never a crossing"),
+    Mutation("intersection-interior-faces", "fem_anim/contact/intersection.py",
+             "unique[counts == 1]", "unique[counts >= 1]",
+             ("tests/test_intersection_check.py::test_the_surface_of_a_cube_of_six_tetrahedra",),
+             "faces shared by two tetrahedra taken as surface"),
+    Mutation("modes-bodies-ignored", "fem_anim/scene/modes.py",
+             'bodies = raw.get("body") if isinstance(raw.get("body"), list) else [raw]',
+             "bodies = [raw]",
+             ("tests/test_solver_modes_bodies.py::"
+              "test_bodies_of_several_models_keep_the_exact_hessian",),
+             "preview reads the material model of the top level only: on [[body]] scenes of "
+             "several models auto filters one model's tangent for all"),
+    Mutation("trust-radius-carried-over", "fem_anim/solver/hessian_choice.py",
+             "        self._radius = None\n        self._longest = 0.0\n",
+             "        self._longest = 0.0\n",
+             (TR_RESET,),
+             "the trust radius of one step's end carried into the next step"),
+    Mutation("cg-indefinite-carried-over", "fem_anim/solver/hessian_choice.py",
+             "        self._indefinite_seen = False\n        self.leave_trust_region()\n",
+             "        self.leave_trust_region()\n",
+             (TR_RESET,),
+             "CG's indefiniteness of one step remembered in the next: the next step "
+             "preconditioned by the shifted ICC copy and stepped in a trust region at once"),
+    Mutation("schur-preconditioner-sign", "fem_anim/problem/mixed_space.py",
+             "self.matrix.scale(-weight * self.scale)", "self.matrix.scale(weight * self.scale)",
+             (SCHUR,),
+             "the Schur preconditioner of the wrong sign (FGMRES still converges, slower)"),
+    Mutation("schur-preconditioner-stale", "fem_anim/problem/mixed_space.py",
+             "        self.mass.copy(self.matrix)\n", "",
+             (SCHUR,),
+             "each update rescales the last step's preconditioner instead of the pressure mass"),
+    Mutation("schur-preconditioner-no-mu", "fem_anim/problem/objective.py",
+             "mu_value * (1.0 + mu_value * inv_kappa))", "(1.0 + mu_value * inv_kappa))",
+             (SCHUR,),
+             "the Schur preconditioner's scale without the shear modulus"),
+    Mutation("mixed-quadrature-one-low", "fem_anim/problem/discretisation.py",
+             "max(self.quadrature_degree, 1 + d * (degree - 1))",
+             "max(self.quadrature_degree, d * (degree - 1))",
+             ("tests/test_quadrature_exactness.py::"
+              "test_constraint_of_every_pressure_test_function_is_exact",),
+             "the mixed rule one degree low: exact for q = 1 (the volume), not for other q"),
+    Mutation("reported-obstacle-energy-with-friction", "fem_anim/problem/energy_terms.py",
+             'ufl_forms["contact"] = self.contact.energy',
+             'ufl_forms["contact"] = self.contact.energy + self.contact.friction',
+             ("tests/test_contact_energy_report.py::"
+              "test_reported_contact_energy_is_the_barrier_of_the_written_positions",),
+             "the obstacles' lagged friction potential reported as stored contact energy"),
+    Mutation("reported-ipc-energy-with-friction", "fem_anim/problem/reported_energies.py",
+             'values["contact"] += self.ipc.energy(friction=False)',
+             'values["contact"] += self.ipc.energy(friction=True)',
+             ("tests/test_contact_energy_report.py::"
+              "test_reported_ipc_energy_is_ipctks_barrier_of_the_written_positions",),
+             "the lagged friction potential between bodies reported as stored contact energy"),
 ]
 
 def copy_tree(dest: Path) -> None:
