@@ -156,3 +156,68 @@ def test_blender_reads_usd_and_obj_as_the_run(pile_exports, tmp_path):
                 ours = np.cross(b - a, c - a)
                 assert np.all(np.einsum("ij,ij->i", ours, got["normals"]) > 0), (kind, name)
             assert report["obj"][str(1 + k)][name]["object"] == name
+
+
+#: Runs inside Blender: argv = usd file, png, frame, camera target xyz, camera distance.
+PICTURE_SCRIPT = r'''
+import math, sys
+import bpy
+from mathutils import Vector
+
+usd, png, frame = sys.argv[1], sys.argv[2], int(sys.argv[3])
+target, distance = Vector([float(v) for v in sys.argv[4:7]]), float(sys.argv[7])
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.wm.usd_import(filepath=usd, set_frame_range=True)
+scene = bpy.context.scene
+scene.frame_set(frame)
+palette = [(0.90, 0.45, 0.20), (0.20, 0.55, 0.85), (0.35, 0.70, 0.35), (0.80, 0.30, 0.60)]
+bodies = [o for o in bpy.data.objects if o.type == "MESH" and o.modifiers]
+for o in (o for o in bpy.data.objects if o.type == "MESH"):
+    material = bpy.data.materials.new(o.name)
+    material.use_nodes = True
+    colour = palette[bodies.index(o) % len(palette)] if o in bodies else (0.8, 0.8, 0.8)
+    material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = \
+        (*colour, 1.0)
+    o.data.materials.append(material)
+camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+scene.collection.objects.link(camera)
+camera.location = target + distance * Vector((1.0, -1.0, 0.75)).normalized()
+camera.rotation_euler = (target - camera.location).to_track_quat("-Z", "Y").to_euler()
+scene.camera = camera
+sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", type="SUN"))
+sun.data.energy = 3.0
+sun.rotation_euler = (math.radians(40), math.radians(10), math.radians(30))
+scene.collection.objects.link(sun)
+scene.world = bpy.data.worlds.new("world")
+scene.world.color = (0.8, 0.82, 0.86)
+scene.render.engine = "CYCLES"
+scene.cycles.device = "CPU"
+scene.cycles.samples = 32
+scene.render.resolution_x, scene.render.resolution_y = 640, 420
+scene.render.filepath = png
+bpy.ops.render.render(write_still=True)
+'''
+
+
+def render_picture(run_dir: Path, png: Path) -> None:
+    """Render a run's USD file (``<scene>.usdc``) at its last frame in Blender (Cycles, CPU),
+    the camera aimed at the bodies' centre from a distance of three times their size."""
+    run = read_run(run_dir)
+    last = len(run.times) - 1
+    x = run.positions(last)
+    target = 0.5 * (x.min(axis=0) + x.max(axis=0))
+    distance = 2.2 * float(np.max(x.max(axis=0) - x.min(axis=0)))
+    with open(run_dir / ".picture.py", "w") as f:
+        f.write(PICTURE_SCRIPT)
+    python = VENV / "bin" / "python"
+    try:
+        subprocess.run([str(python), str(run_dir / ".picture.py"),
+                        str(run_dir / f"{run.name}.usdc"), str(Path(png).resolve()),
+                        str(1 + last), *map(str, target), str(distance)], check=True)
+    finally:
+        (run_dir / ".picture.py").unlink()
+
+
+if __name__ == "__main__":
+    # The picture of docs/export.md: python tests/test_blender_roundtrip.py RUN_DIR PNG
+    render_picture(Path(sys.argv[1]), Path(sys.argv[2]))
