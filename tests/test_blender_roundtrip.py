@@ -25,7 +25,7 @@ from conftest import ROOT
 
 from fem_anim.cli import main
 from fem_anim.export.run_reader import read_run
-from fem_anim.export.surface import body_surfaces
+from fem_anim.export.boundary import body_surfaces
 
 pytestmark = pytest.mark.slow
 

@@ -22,7 +22,7 @@ from conftest import ROOT
 
 from fem_anim.cli import main
 from fem_anim.export.run_reader import read_run
-from fem_anim.export.surface import boundary_faces, body_surfaces
+from fem_anim.export.boundary import boundary_faces, body_surfaces
 from fem_anim.export.usd_stage import write_usd
 from fem_anim.output.rundir import MARKER, read_manifest
 

@@ -1,6 +1,6 @@
 """Export: a finished run in the formats animation packages read.
 
-:mod:`~fem_anim.export.surface` finds each body's boundary surface, wound outward;
+:mod:`~fem_anim.export.boundary` finds each body's boundary surface, wound outward;
 :mod:`~fem_anim.export.run_reader` reads a run directory without DOLFINx;
 :mod:`~fem_anim.export.usd_stage` writes a USD stage (one time-sampled mesh per body, the
 obstacles, the frame rate, through Pixar's ``usd-core``);
@@ -12,9 +12,9 @@ Public names load lazily.
 from fem_anim.lazy_exports import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
-    "BodySurface": "surface",
-    "body_surfaces": "surface",
-    "boundary_faces": "surface",
+    "BodySurface": "boundary",
+    "body_surfaces": "boundary",
+    "boundary_faces": "boundary",
     "RunData": "run_reader",
     "read_run": "run_reader",
     "write_usd": "usd_stage",

@@ -1,6 +1,6 @@
 """A run as mesh sequences: one OBJ or PLY file per body per frame.
 
-Each body's boundary surface (:mod:`fem_anim.export.surface`, triangles wound
+Each body's boundary surface (:mod:`fem_anim.export.boundary`, triangles wound
 counter-clockwise seen from outside) is written at every frame as
 ``<body>_<frame>.<obj|ply>``, the frame number ``start_frame + k`` zero-padded to at least
 four digits (Blender's and Houdini's sequence importers count the files by that number).
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.export.run_reader import RunData
-from fem_anim.export.surface import body_surfaces
+from fem_anim.export.boundary import body_surfaces
 
 __all__ = ["FORMATS", "write_obj", "write_ply", "sequence_files", "write_sequence"]
 

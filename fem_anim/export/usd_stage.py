@@ -4,7 +4,7 @@ The stage (Pixar's ``usd-core``, module ``pxr``) has one ``Xform`` root ``/<scen
 default prim) holding
 
 * ``/<scene>/<body>``: a ``UsdGeom.Mesh`` per body, named after the body
-  (:func:`prim_names`): its boundary surface (:mod:`fem_anim.export.surface`), triangles
+  (:func:`prim_names`): its boundary surface (:mod:`fem_anim.export.boundary`), triangles
   wound counter-clockwise seen from outside (``orientation = rightHanded``, no subdivision),
   ``points`` and ``extent`` sampled at every frame, and the primvars ``displacement``
   (|u| per vertex, m), ``energy_density`` (per face: the mean psi of the cell behind it,
@@ -30,7 +30,7 @@ import numpy as np
 
 from fem_anim.errors import FemAnimError
 from fem_anim.export.run_reader import RunData, read_run
-from fem_anim.export.surface import body_surfaces
+from fem_anim.export.boundary import body_surfaces
 
 __all__ = ["write_usd", "export_staged_run", "frame_rate", "time_codes", "prim_names",
            "up_axis", "usd_file_name"]

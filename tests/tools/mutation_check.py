@@ -342,7 +342,7 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_reference_comparison.py::test_step_objective",),
              "the inertia term's value taken at x + y instead of x - y"),
     # export: USD stages and mesh sequences of a run, body ids (fem_anim/export/)
-    Mutation("export-winding-not-flipped", "fem_anim/export/surface.py",
+    Mutation("export-winding-not-flipped", "fem_anim/export/boundary.py",
              "    faces[inward] = faces[inward][:, [0, 2, 1]]\n", "",
              ("tests/test_export.py::test_boundary_of_a_cube_is_closed_and_outward",
               "tests/test_export.py::test_each_body_surface_encloses_its_volume"),
