@@ -18,7 +18,7 @@ import h5py
 import meshio
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, clean_environment, fem_anim_command, mpirun_command
 
 from fem_anim.cli import main
 from fem_anim.export.run_reader import read_run
@@ -292,6 +292,30 @@ def test_2d_run_and_sphere_obstacle(tmp_path):
     assert sphere.GetRadiusAttr().Get() == 0.5
     world = UsdGeom.Xformable(sphere).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
     assert list(world.ExtractTranslation()) == [0.5, -1.0, 0.0]
+
+
+@pytest.mark.mpi
+def test_usd_of_a_parallel_run_is_the_serial_one(pile, tmp_path):
+    """Under ``mpirun -n 2`` rank 0 writes the same stage: the same surfaces, the same samples."""
+    import subprocess
+
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("no mpirun")
+    out = tmp_path / "run"
+    args = ["run", str(ROOT / "demos" / "pile.toml"), "-o", str(out), "--quiet"]
+    for setting in PILE_SETS + ["time.steps=2"]:  # the serial run's first frames
+        args += ["--set", setting]
+    done = subprocess.run(mpirun + fem_anim_command() + args, capture_output=True, text=True,
+                          timeout=600, env=clean_environment())
+    assert done.returncode == 0, done.stderr[-2000:]
+    serial, parallel = (Usd.Stage.Open(str(p / "pile.usdc")) for p in (pile, out))
+    for name in read_run(pile).body_names:
+        for code in (1.0, 3.0):
+            a, ta = usd_mesh_arrays(serial, f"/pile/{name}", code)
+            b, tb = usd_mesh_arrays(parallel, f"/pile/{name}", code)
+            assert np.array_equal(ta, tb)
+            assert np.allclose(a, b, rtol=0, atol=1e-6 * np.abs(a).max())
 
 
 def test_output_usd_is_off_by_default():
