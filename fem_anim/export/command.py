@@ -145,6 +145,8 @@ def _write_usd_file(run, target: Path, start_frame: int) -> None:
         os.replace(tmp, target)
         if owned:
             write_manifest(folder, read_manifest(folder) | {target.name})
+    except OSError as err:
+        raise OSError(err.errno, err.strerror, str(target)) from None
     finally:
         tmp.unlink(missing_ok=True)
         if lock is not None:

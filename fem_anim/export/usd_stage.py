@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -127,6 +128,12 @@ def _obstacle_prims(stage, root: str, run: RunData, low: np.ndarray, high: np.nd
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
 
 
+def _reason(err: Exception) -> str:
+    """The last quoted message of a USD error (its text is a stack of C++ locations)."""
+    quoted = re.findall(r": '([^']*)'", str(err))
+    return quoted[-1] if quoted else str(err).strip().splitlines()[-1]
+
+
 def write_usd(run: RunData, path: Path, start_frame: int = 1) -> None:
     """Write the run as a USD stage (binary ``.usdc``, or ``.usda`` text by suffix).
 
@@ -144,8 +151,7 @@ def write_usd(run: RunData, path: Path, start_frame: int = 1) -> None:
     try:
         stage = Usd.Stage.CreateNew(str(path))
     except Tf.ErrorException as err:
-        raise OSError(errno.EIO, f"USD cannot create it ({str(err).strip()})", str(path)) \
-            from None
+        raise OSError(errno.EIO, f"USD cannot create it: {_reason(err)}", str(path)) from None
     fps = frame_rate(run.times)
     codes = time_codes(run.times, start_frame)
     stage.SetTimeCodesPerSecond(fps)
@@ -192,8 +198,7 @@ def write_usd(run: RunData, path: Path, start_frame: int = 1) -> None:
     try:
         stage.GetRootLayer().Save()
     except Tf.ErrorException as err:
-        raise OSError(errno.EIO, f"USD cannot write it ({str(err).strip()})", str(path)) \
-            from None
+        raise OSError(errno.EIO, f"USD cannot write it: {_reason(err)}", str(path)) from None
 
 
 def export_staged_run(staging: Path, name: str, comm) -> None:
@@ -221,5 +226,7 @@ def export_staged_run(staging: Path, name: str, comm) -> None:
             raise OSError(errno.EIO, str(err), str(target)) from None
         write_usd(run, tmp)
         os.replace(tmp, target)
+    except OSError as err:
+        raise OSError(err.errno, err.strerror, str(target)) from None
     finally:
         tmp.unlink(missing_ok=True)
