@@ -29,8 +29,8 @@ import sys
 from pathlib import Path
 
 from fem_anim.console import OneLineParser, print_error, quiet_jit_logging
-from fem_anim.export.command import add_export_parser, export_command
 from fem_anim.errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
+from fem_anim.export.command import add_export_parser, export_command
 from fem_anim.petsc_options import check_cli_options, init_petsc, split_petsc_args
 
 __all__ = ["main", "build_parser"]

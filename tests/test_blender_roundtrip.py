@@ -24,8 +24,8 @@ import pytest
 from conftest import ROOT
 
 from fem_anim.cli import main
-from fem_anim.export.run_reader import read_run
 from fem_anim.export.boundary import body_surfaces
+from fem_anim.export.run_reader import read_run
 
 pytestmark = pytest.mark.slow
 

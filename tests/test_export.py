@@ -21,13 +21,13 @@ import pytest
 from conftest import ROOT, clean_environment, fem_anim_command, mpirun_command
 
 from fem_anim.cli import main
+from fem_anim.export.boundary import body_surfaces, boundary_faces
 from fem_anim.export.run_reader import read_run
-from fem_anim.export.boundary import boundary_faces, body_surfaces
 from fem_anim.export.usd_stage import write_usd
 from fem_anim.output.rundir import MARKER, read_manifest
 
 pxr = pytest.importorskip("pxr")
-from pxr import Usd, UsdGeom  # noqa: E402
+from pxr import Usd, UsdGeom  # noqa: E402 (after the importorskip)
 
 #: A coarse pile: four bodies, few cells, six steps (about 5 s).
 PILE_SETS = ["time.steps=6", "output.render=false", "output.usd=true",
@@ -139,7 +139,7 @@ def test_usd_time_samples_are_the_trajectory(pile):
         mesh = UsdGeom.Mesh(stage.GetPrimAtPath(f"/pile/{name}"))
         assert mesh.GetPointsAttr().GetTimeSamples() == [1.0 + k for k in range(times.size)]
         for k, u in enumerate(frames):
-            x, triangles = usd_mesh_arrays(stage, f"/pile/{name}", 1.0 + k)
+            x, _ = usd_mesh_arrays(stage, f"/pile/{name}", 1.0 + k)
             expected = (run.points + u)[surface.vertices]
             assert np.allclose(x, expected, rtol=0, atol=4e-7 * np.abs(expected).max())
             lengths = np.asarray(UsdGeom.PrimvarsAPI(mesh).GetPrimvar("displacement")

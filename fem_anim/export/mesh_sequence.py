@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.export.run_reader import RunData
 from fem_anim.export.boundary import body_surfaces
+from fem_anim.export.run_reader import RunData
 
 __all__ = ["FORMATS", "write_obj", "write_ply", "sequence_files", "write_sequence"]
 

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.errors import FemAnimError
-from fem_anim.export.run_reader import RunData, read_run
 from fem_anim.export.boundary import body_surfaces
+from fem_anim.export.run_reader import RunData, read_run
 
 __all__ = ["write_usd", "export_staged_run", "frame_rate", "time_codes", "prim_names",
            "up_axis", "usd_file_name"]
