@@ -5,12 +5,14 @@ Usage::
     fem-anim run [SCENE.toml] [-o OUTDIR] [--set KEY=VALUE ...] [--solver NAME] [--preview]
                  [--quiet] [--resume OUTDIR] [PETSc options ...]
     fem-anim render OUTDIR [--set render.KEY=VALUE ...] [--quiet]
+    fem-anim export OUTDIR [--format usd|obj|ply] [-o PATH] [--start-frame N] [--quiet]
     fem-anim solvers
     fem-anim bench [SCENE.toml] [--sweep KEY=V1,V2,...]... [--repeats N] [--reference KEY=V]...
                    [-o OUTDIR] | --extremes [--full] | --perf ... | --hard [--reduced]
 
 ``run`` simulates a scene (each time step minimises the step objective g(x) of seed
 section 3.1, eq. 4) and writes its run directory; ``render`` draws a saved run again;
+``export`` writes a run as USD or OBJ/PLY sequences (:mod:`fem_anim.export`);
 ``solvers`` lists the linear solver presets; ``bench`` runs the benchmarks of
 :mod:`fem_anim.bench`.
 
@@ -28,6 +30,7 @@ from pathlib import Path
 
 from fem_anim.console import OneLineParser, print_error, quiet_jit_logging
 from fem_anim.errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
+from fem_anim.export.command import add_export_parser, export_command
 from fem_anim.petsc_options import check_cli_options, init_petsc, split_petsc_args
 
 __all__ = ["main", "build_parser"]
@@ -61,6 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="render.KEY=VALUE", help="override a [render] key")
     render.add_argument("-q", "--quiet", action="store_true", help="print nothing")
+    add_export_parser(sub)
     sub.add_parser("solvers", help="list the linear solver presets and their PETSc options")
     bench = sub.add_parser("bench", add_help=False,
                            help="trade study (SCENE --sweep KEY=V1,V2 ...; -h for its options), "
@@ -232,6 +236,8 @@ def main(argv: list[str] | None = None) -> int:
 
             print(describe_presets())
             return 0
+        if args.command == "export":
+            return export_command(args)
         if args.command == "render":
             return _render(args)
         rest = list(argv)

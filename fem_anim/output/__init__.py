@@ -18,6 +18,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "RunDirectory": "files",
     "STATS_COLUMNS": "files",
     "StatsWriter": "files",
+    "body_numbers": "files",
     "TrajectoryWriter": "files",
     "VertexGather": "files",
     "write_atomically": "rundir",

@@ -7,10 +7,10 @@ run. Everything is written into a staging directory ``OUTDIR/.partial`` and move
 file posing as a result, and keeps its staging area for ``--resume``.
 
 Files: ``trajectory.xdmf`` + ``trajectory.h5`` (displacement and cell energy density
-per frame, ParaView and meshio read it), ``stats.csv`` (one row per step), ``final.vtu``
-(point data ``displacement``, cell data ``energy_density``), ``scene.json`` (the validated
-scene) and, from :mod:`fem_anim.render.animation` and :mod:`fem_anim.render.plots`, the
-pictures in :data:`RENDER_PRODUCTS`.
+per frame, the cells' ``body`` number, ParaView and meshio read it), ``stats.csv`` (one row
+per step), ``final.vtu`` (point data ``displacement``, cell data ``energy_density`` and
+``body``), ``scene.json`` (the validated scene) and, from :mod:`fem_anim.render.animation`
+and :mod:`fem_anim.render.plots`, the pictures in :data:`RENDER_PRODUCTS`.
 """
 
 from __future__ import annotations
@@ -26,12 +26,14 @@ from mpi4py import MPI
 
 from fem_anim import compat
 from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.mesh.connectivity import cell_components
 from fem_anim.mesh.simplex import SimplexMesh
 from fem_anim.output.rundir import (RENDER_PRODUCTS, STAGING, claim, install, read_manifest,
                                     write_atomically)
 
 __all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "TrajectoryWriter",
-           "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS"]
+           "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS",
+           "body_numbers"]
 
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "initial_residual_norm", "newton_decrement", "shift",
@@ -301,6 +303,7 @@ class TrajectoryWriter:
             self.h5 = h5py.File(self.h5_path, "w")
             self.h5.create_dataset("data0", data=self.points)
             self.h5.create_dataset("data1", data=self.cells)
+            self.h5.create_dataset("body", data=body_numbers(self.cells))
         else:  # continue a run: keep its first frames, drop the rest
             self.h5 = h5py.File(self.h5_path, "a")
             stored = self.h5.attrs.get("times", np.zeros(0))
@@ -312,6 +315,8 @@ class TrajectoryWriter:
                               f"{keep_frames} (the run cannot be continued from it)",
                               str(self.h5_path))
             self.times = [float(t) for t in stored[:keep_frames]]
+            if "body" not in self.h5:  # a run begun before the cells had their body
+                self.h5.create_dataset("body", data=body_numbers(self.cells))
             for k in range(keep_frames, len(self.h5.attrs["times"])):
                 del self.h5[f"data{k + 2}"]
                 if f"energy_density{k}" in self.h5:
@@ -353,7 +358,10 @@ class TrajectoryWriter:
             f"{h5}:/data{k + 2}</DataItem></Attribute>"
             f'<Attribute Name="energy_density" AttributeType="Scalar" Center="Cell">'
             f'<DataItem DataType="Float" Dimensions="{m}" Format="HDF" Precision="8">'
-            f"{h5}:/energy_density{k}</DataItem></Attribute></Grid>"
+            f"{h5}:/energy_density{k}</DataItem></Attribute>"
+            f'<Attribute Name="body" AttributeType="Scalar" Center="Cell">'
+            f'<DataItem DataType="Int" Dimensions="{m}" Format="HDF" Precision="8">'
+            f"{h5}:/body</DataItem></Attribute></Grid>"
             for k, t in enumerate(self.times))
         return (
             '<Xdmf xmlns:xi="http://www.w3.org/2003/XInclude" Version="3.0"><Domain>'
@@ -389,10 +397,26 @@ def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None
     import meshio
 
     cell_type = {2: "triangle", 3: "tetra"}[domain.points.shape[1]]
-    cell_data = {} if energy_density is None else {"energy_density": [energy_density]}
+    cell_data = {"body": [body_numbers(domain.cells)]}
+    if energy_density is not None:
+        cell_data["energy_density"] = [energy_density]
     meshio.write(path, meshio.Mesh(_pad3(domain.points), [(cell_type, domain.cells)],
                                    point_data={"displacement": _pad3(displacement)},
                                    cell_data=cell_data))
+
+
+def body_numbers(cells: np.ndarray) -> np.ndarray:
+    """The body number of each cell (cell data ``body``): the mesh's connected parts,
+    numbered by first cell, which are a ``[[body]]`` scene's bodies in order (each body is
+    one piece, and their cells are concatenated).
+
+    Args:
+        cells: The input cells.
+
+    Returns:
+        ``(num_cells,)`` int64, 0 for a one-body scene.
+    """
+    return cell_components(cells, int(cells.max()) + 1).astype(np.int64)
 
 
 def write_scene(path: Path, scene, comm: MPI.Comm) -> None:

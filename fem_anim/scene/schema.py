@@ -244,6 +244,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "checkpoint_every": Key(int, None, c.at_least_one, unit="frames",
                                 doc="frames between checkpoints (default steps/10)"),
         "render": Key(bool, True, doc="render the run's pictures when it ends"),
+        "usd": Key(bool, False, doc="also write <name>.usdc (one time-sampled mesh per body, "
+                   "fem_anim.export) when the run ends"),
     },
     "render": {
         "color_by": Key(str, "displacement", choices=COLOR_FIELDS,

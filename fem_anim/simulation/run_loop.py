@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.errors import FemAnimError, Interrupted, describe_os_error
+from fem_anim.export.usd_stage import export_staged_run, usd_file_name
 from fem_anim.output.files import (RunDirectory, StatsWriter, TrajectoryWriter, write_final,
                                    write_scene)
 from fem_anim.simulation.adaptive import AdaptiveStepper
@@ -64,6 +65,9 @@ def run_frames(sim, output_dir: Path | None, quiet: bool, resume: bool) -> RunRe
         sim.clock.add("output", loop_s - stepping)  # frames, stats, checkpoints, finals
         if run_dir is not None:
             with sim.clock.phase("output"):
+                if sim.scene["output"]["usd"]:  # installed with the run's other files
+                    _io(sim, run_dir.file(usd_file_name(sim.scene.name)), export_staged_run,
+                        run_dir.staging, sim.scene.name, sim.comm)
                 run_dir.commit()
             if sim.scene["output"]["render"]:
                 with sim.clock.phase("render"):

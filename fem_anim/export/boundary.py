@@ -1,0 +1,96 @@
+"""Each body's boundary surface, wound outward, as animation packages want it.
+
+A run stores the whole volume mesh (tetrahedra, or triangles in 2D); a renderer or an
+animation package wants the skin. A boundary face of a tetrahedral mesh is a face that
+belongs to exactly one tetrahedron. It is wound so that its normal
+``(b - a) x (c - a)`` points away from the tetrahedron's fourth vertex, i.e. out of the
+body: counter-clockwise seen from outside, USD's ``rightHanded`` orientation and the
+convention of OBJ and PLY. A 2D run's bodies are flat sheets in the plane z = 0; their
+surface is the triangles themselves, counter-clockwise seen from +z.
+
+Each body's surface has its own vertex numbering (the mesh vertices its faces use, in
+mesh order), so a body exports as one self-contained mesh; ``vertices`` maps it back to
+the run's vertices, and ``owner`` names the cell behind each face (its energy density is
+the face's).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["BodySurface", "boundary_faces", "body_surfaces"]
+
+#: The faces of a tetrahedron (a, b, c, d): face k is opposite vertex k.
+TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+
+
+@dataclass
+class BodySurface:
+    """One body's boundary surface.
+
+    Attributes:
+        body: The body's number (0, 1, ... in the scene's ``[[body]]`` order).
+        vertices: The run's vertex number of each surface vertex, ``(n,)``.
+        triangles: Outward-wound triangles as surface vertex numbers, ``(f, 3)``.
+        owner: The run's cell number behind each triangle, ``(f,)``.
+    """
+
+    body: int
+    vertices: np.ndarray
+    triangles: np.ndarray
+    owner: np.ndarray
+
+
+def boundary_faces(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary faces of a simplex mesh, wound outward, and the cell owning each.
+
+    Args:
+        points: Rest vertex coordinates ``(v, d)``, d = 2 or 3.
+        cells: Tetrahedra ``(m, 4)`` or, in 2D, triangles ``(m, 3)``.
+
+    Returns:
+        ``(faces, owner)``: triangles ``(f, 3)`` of run vertex numbers whose normal points
+        out of their cell (in 2D: every triangle, counter-clockwise about +z), and the cell
+        number of each.
+    """
+    cells = np.asarray(cells, dtype=np.int64)
+    if cells.shape[1] == 3:  # 2D: the sheet itself, counter-clockwise about +z
+        x = points[cells]
+        area2 = (x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1]) \
+            - (x[:, 1, 1] - x[:, 0, 1]) * (x[:, 2, 0] - x[:, 0, 0])
+        faces = np.where((area2 < 0)[:, None], cells[:, [0, 2, 1]], cells)
+        return faces, np.arange(cells.shape[0])
+    all_faces = cells[:, TET_FACES].reshape(-1, 3)
+    owner = np.repeat(np.arange(cells.shape[0]), 4)
+    opposite = cells.ravel()  # face k of a cell is opposite its vertex k
+    key = np.sort(all_faces, axis=1)
+    _, index, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    once = np.sort(index[counts == 1])  # faces of one cell only, in cell order
+    faces, owner, opposite = all_faces[once], owner[once], opposite[once]
+    a, b, c = (points[faces[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    inward = np.einsum("ij,ij->i", normal, points[opposite] - a) > 0.0
+    faces[inward] = faces[inward][:, [0, 2, 1]]
+    return faces, owner
+
+
+def body_surfaces(points: np.ndarray, cells: np.ndarray, body: np.ndarray) -> list[BodySurface]:
+    """The boundary surface of every body, each with its own vertex numbering.
+
+    Args:
+        points: Rest vertex coordinates ``(v, d)``.
+        cells: The run's cells.
+        body: The body number of each cell, ``(m,)`` (0, 1, ...).
+
+    Returns:
+        One :class:`BodySurface` per body, in body order.
+    """
+    faces, owner = boundary_faces(points, cells)
+    surfaces = []
+    for k in range(int(body.max()) + 1 if body.size else 0):
+        mine = body[owner] == k
+        used, local = np.unique(faces[mine], return_inverse=True)
+        surfaces.append(BodySurface(k, used, local.reshape(-1, 3), owner[mine]))
+    return surfaces
