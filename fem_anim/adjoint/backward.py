@@ -219,10 +219,6 @@ class BackwardSweep:
         for n in range(tape.steps - 1, -1, -1):
             start, end = tape.states[n], tape.states[n + 1]
             bar = {k: state_bars[n + 1].get(k, zero) for k in STATE_FIELDS}
-            if integ.name == "newmark":  # the pins' rates overwrite v and a (finish_step)
-                for k in ("v", "a"):
-                    bar[k] = bar[k].copy()
-                    bar[k][self.pinned] = 0.0
             maps = linear_maps(integ, h, start)
             U = maps["U"]
             x_bar = sum(U[o, "x"] * bar[o] for o in STATE_FIELDS)
