@@ -22,7 +22,8 @@ import sys
 import numpy as np
 import pytest
 import ufl
-from conftest import ROOT, clean_environment, mpirun_command
+from conftest import ROOT, clean_environment, fem_anim_command, mpirun_command
+from scenes import scene_toml
 
 import fem_anim
 from fem_anim.adjoint.differentiate import AdjointModel
@@ -208,6 +209,74 @@ def test_unconverged_step_has_no_gradient():
     model = AdjointModel(fem_anim.Scene.from_dict(d), PARAMS)
     with pytest.raises(ConvergenceError, match="gradient is undefined"):
         model.evaluate(model.parameters.values(), objective())
+
+
+def fem_anim_cli(args: list[str], cwd) -> subprocess.CompletedProcess:
+    return subprocess.run(fem_anim_command() + args, cwd=cwd, capture_output=True, text=True,
+                          timeout=600)
+
+
+@pytest.fixture(scope="module")
+def fit_setup(tmp_path_factory):
+    """A scene file and a reference run made with E = 1.3e4 Pa, nu = 0.25 (the scene's:
+    1e4 Pa, 0.3)."""
+    root = tmp_path_factory.mktemp("fit")
+    scene = scene_dict("implicit_euler", damped=False, steps=4)
+    (root / "scene.toml").write_text(scene_toml(scene))
+    reference = scene_dict("implicit_euler", damped=False, steps=4)
+    reference["material"] |= {"youngs_modulus": 1.3e4, "poisson_ratio": 0.25}
+    (root / "reference.toml").write_text(scene_toml(reference))
+    r = fem_anim_cli(["run", "reference.toml", "-o", "ref", "-q"], root)
+    assert r.returncode == 0, r.stderr
+    return root
+
+
+def test_fit_command_recovers_the_reference_material(fit_setup):
+    root = fit_setup
+    r = fem_anim_cli(["fit", "scene.toml", "--target", "ref", "--param",
+                      "material.youngs_modulus", "--param", "material.poisson_ratio",
+                      "-o", "fitted"], root)
+    assert r.returncode == 0, r.stderr
+    result = json.loads((root / "fitted" / "fit.json").read_text())
+    assert result["material.youngs_modulus"] == pytest.approx(1.3e4, rel=1e-2)
+    assert result["material.poisson_ratio"] == pytest.approx(0.25, rel=1e-2)
+    assert result["iterations"] <= 30
+    rows = (root / "fitted" / "fit.csv").read_text().splitlines()
+    assert rows[0] == ("evaluation,material.youngs_modulus,material.poisson_ratio,objective,"
+                       "gradient_norm,accepted")
+    assert len(rows) - 1 == result["evaluations"]
+    best = min(rows[1:], key=lambda row: float(row.split(",")[3]))
+    assert float(best.split(",")[1]) == result["material.youngs_modulus"]
+    assert float(best.split(",")[3]) == result["objective"]
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--param", "material.mooney_ratio"], "not a parameter"),
+    (["--param", "material.youngs_modulus", "--bounds", "material.density=1,2"],
+     "not one of the fitted parameters"),
+    (["--param", "material.youngs_modulus", "-o", "user"], "not empty"),
+    (["--param", "material.youngs_modulus", "--target", "coarse"], "another mesh"),
+    (["--param", "material.youngs_modulus", "--target", "nowhere"], "not a finished run"),
+    (["--param", "material.youngs_modulus", "--set", "solver.max_iterations=1",
+      "--set", 'solver.on_budget="accept"'], "gradient is undefined"),
+])
+def test_fit_command_bad_input_is_one_line(fit_setup, args, message):
+    root = fit_setup
+    (root / "user").mkdir(exist_ok=True)
+    (root / "user" / "notes.txt").write_text("mine")
+    if "coarse" in args and not (root / "coarse").exists():
+        coarse = scene_dict("implicit_euler", damped=False, steps=4)
+        coarse["mesh"]["divisions"] = [4, 2, 2]
+        (root / "coarse.toml").write_text(scene_toml(coarse))
+        assert fem_anim_cli(["run", "coarse.toml", "-o", "coarse", "-q"], root).returncode == 0
+    target = [] if "--target" in args else ["--target", "ref"]
+    r = fem_anim_cli(["fit", "scene.toml", *target, *args, "-o", "bad", "-q"]
+                     if "-o" not in args else ["fit", "scene.toml", *target, *args, "-q"], root)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fem-anim: error: "), r.stderr
+    assert message in lines[0]
+    assert (root / "user" / "notes.txt").read_text() == "mine"
 
 
 def mpi_gradient() -> dict:

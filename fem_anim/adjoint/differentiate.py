@@ -105,7 +105,7 @@ class AdjointModel:
         self.timing["forward"] = self.tape.forward_s
         if objective is None:
             return None
-        self._bind(objective)
+        self.bind(objective)
         return objective.terms(self.tape)[0]
 
     def evaluate(self, theta, objective) -> tuple[float, np.ndarray]:
@@ -117,7 +117,7 @@ class AdjointModel:
         self.parameters.assign(theta)
         self.tape = record_forward(self.sim, self.parameters, self.steps, self.h)
         self.timing["forward"] = self.tape.forward_s
-        self._bind(objective)
+        self.bind(objective)
         start = time.perf_counter()
         value, bars = objective.terms(self.tape)
         state_bars = [{} for _ in self.tape.states]
@@ -127,7 +127,9 @@ class AdjointModel:
         self.timing["backward"] = time.perf_counter() - start
         return float(value), grad
 
-    def _bind(self, objective) -> None:
+    def bind(self, objective) -> None:
+        """Prepare an objective for this model, once (collective; raises its bad input,
+        e.g. a target run on another mesh)."""
         if id(objective) not in self._bound:
             objective.bind(self)
             self._bound.add(id(objective))
