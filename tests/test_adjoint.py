@@ -113,6 +113,19 @@ def test_gradient_equals_central_differences(integrator, damped):
     model.parameters.assign(theta)
 
 
+@pytest.mark.parametrize("integrator", ["implicit_euler", "bdf2", "newmark"])
+def test_gradient_with_a_moving_handle(integrator):
+    """The pinned face moves (a handle): its prescribed motion does not depend on theta."""
+    d = scene_dict(integrator, damped=True)
+    d["pin"][0] |= {"velocity": [0.2, 0.0, 0.3], "angular_velocity": 2.0,
+                    "axis": [1.0, 0.0, 0.0]}
+    model = AdjointModel(fem_anim.Scene.from_dict(d), PARAMS)
+    obj = objective()
+    theta = model.parameters.values()
+    _, grad = model.evaluate(theta, obj)
+    np.testing.assert_allclose(grad, central_differences(model, obj, theta), rtol=1e-6)
+
+
 def central_differences(model, obj, theta, names=None) -> np.ndarray:
     out = []
     for i, name in enumerate(model.names):

@@ -42,6 +42,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import compat
+from fem_anim.problem.form_compiler import compile_forms
 from fem_anim.simulation.integrators import State
 
 __all__ = ["BackwardSweep", "STATE_FIELDS", "linear_maps"]
@@ -125,7 +126,7 @@ class BackwardSweep:
             for name, f in coefficients.items():
                 forms[f"theta0_{name}"] = ufl.derivative(L0, f, parameters.one)
             forms["mass"] = ufl.replace(p.rho * ufl.inner(du, dv) * p.dx_mass, rep)
-        self.forms = {k: fem.form(v) for k, v in forms.items()}
+        self.forms = compile_forms(forms)  # one FFCx module
         self.H = fem_petsc.create_matrix(self.forms["hessian"])
         self.b = compat.petsc_vec(self.work).duplicate()
         self.x = self.b.duplicate()
@@ -138,6 +139,7 @@ class BackwardSweep:
         self.pinned = np.concatenate([bc.dof_indices()[0] for bc in p.displacement_bcs] +
                                      [np.empty(0, np.int32)])
         self.owned = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+        #: Wall time (s) of the last sweep's Hessian assemblies and factorisations + solves.
         self.solve_s = {"assembly": 0.0, "solve": 0.0}
 
     # -- helpers ------------------------------------------------------------------------
@@ -213,6 +215,7 @@ class BackwardSweep:
             The gradient, in the order of the parameters' names.
         """
         p, integ, h = self.problem, sim.integrator, tape.h
+        self.solve_s = {"assembly": 0.0, "solve": 0.0}
         names = self.parameters.names
         grad = dict.fromkeys(names, 0.0)
         zero = np.zeros_like(tape.states[0].u)
