@@ -177,6 +177,18 @@ def test_callable_and_form_objectives():
         np.testing.assert_allclose(grad, central_differences(model, obj, theta), rtol=1e-6)
 
 
+def test_the_python_api_gives_the_models_gradient():
+    scene = fem_anim.Scene.from_dict(scene_dict("bdf2", True))
+    J, grads = fem_anim.gradient(scene, objective(), ["material.youngs_modulus",
+                                                      "initial.velocity"])
+    model = model_for("bdf2", True)
+    J_model, grad = model.evaluate(model.parameters.values(), objective())
+    assert J == pytest.approx(J_model, rel=1e-12)
+    assert list(grads) == ["material.youngs_modulus", "initial.velocity[0]",
+                           "initial.velocity[1]", "initial.velocity[2]"]
+    np.testing.assert_allclose(list(grads.values()), grad[[0, 3, 4, 5]], rtol=1e-10)
+
+
 def test_memory_and_cost_are_reported():
     model = model_for("implicit_euler", False)
     model.evaluate(model.parameters.values(), objective())
