@@ -126,6 +126,24 @@ def test_gradient_with_a_moving_handle(integrator):
     np.testing.assert_allclose(grad, central_differences(model, obj, theta), rtol=1e-6)
 
 
+@pytest.mark.parametrize("model_name", ["stable_neohookean", "stvk"])
+def test_gradient_in_2d_and_other_materials(model_name):
+    """A plane-strain strip (64 triangles), BDF2 with damping."""
+    d = {"mesh": {"dim": 2, "size": [1.0, 0.2], "divisions": [16, 2]},
+         "material": {"model": model_name, "youngs_modulus": 1.0e4, "poisson_ratio": 0.3,
+                      "density": 1000.0},
+         "time": {"steps": 5, "dt": 0.02, "integrator": "bdf2"}, "output": {"render": False},
+         "gravity": {"acceleration": [0.0, -9.81]}, "initial": {"velocity": [0.0, 0.3]},
+         "damping": {"alpha": 0.5, "beta": 1.0e-3},
+         "pin": [{"min": [-0.01, -1.0], "max": [0.01, 1.0]}]}
+    model = AdjointModel(fem_anim.Scene.from_dict(d), PARAMS)
+    obj = PointTarget([1.0, 0.2], [[1.0, 0.1]], [0.1]) + CentreOfMassTarget([[0.5, 0.05]],
+                                                                            [0.06])
+    theta = model.parameters.values()
+    _, grad = model.evaluate(theta, obj)
+    np.testing.assert_allclose(grad, central_differences(model, obj, theta), rtol=1e-6)
+
+
 def central_differences(model, obj, theta, names=None) -> np.ndarray:
     out = []
     for i, name in enumerate(model.names):

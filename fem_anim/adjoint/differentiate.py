@@ -13,7 +13,7 @@ What is differentiated: implicit Euler, BDF2 and Newmark; the displacement formu
 one material whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...);
 gravity, Rayleigh damping, pins and moving handles. Refused with one line (a
 :class:`~fem_anim.errors.FemAnimError`): contact (obstacles, IPC), the mixed formulation,
-symplectic Euler, materials computing quadrature data outside UFL (corotated), regions and
+symplectic Euler, materials computing quadrature data outside UFL (corotated in 3D), regions and
 bodies.
 """
 
