@@ -10,7 +10,8 @@ kind (Young's modulus, Poisson's ratio, density, initial velocity):
 
 the objectives (point targets, centre of mass, a reference run's trajectory, Python
 callables, UFL forms) likewise; 2 ranks give the serial gradient to 1e-8 (this file run
-under ``mpirun -n 2`` as a script); bad input is one clear error.
+under ``mpirun -n 2`` as a script, with point targets and a reference run's trajectory);
+bad input is one clear error.
 """
 
 from __future__ import annotations
@@ -322,23 +323,29 @@ def test_fit_command_bad_input_is_one_line(fit_setup, args, message):
     assert (root / "user" / "notes.txt").read_text() == "mine"
 
 
-def mpi_gradient() -> dict:
-    """J and the gradient of the damped Newmark case (run on any number of ranks)."""
+def mpi_gradient(reference: str) -> dict:
+    """J and the gradient of the damped Newmark case, point targets and a reference run's
+    trajectory (run on any number of ranks)."""
     model = AdjointModel(fem_anim.Scene.from_dict(scene_dict("newmark", True)), PARAMS)
-    J, grad = model.evaluate(model.parameters.values(), objective())
+    J, grad = model.evaluate(model.parameters.values(),
+                             objective() + TrajectoryMatch(reference))
     return {"J": J, "grad": list(map(float, grad))}
 
 
 @pytest.mark.mpi
-def test_two_ranks_give_the_serial_gradient():
+def test_two_ranks_give_the_serial_gradient(tmp_path):
     mpirun = mpirun_command(2)
     if mpirun is None:
         pytest.skip("mpirun not available")
-    r = subprocess.run([*mpirun, sys.executable, __file__], capture_output=True, text=True,
-                       timeout=600, env=clean_environment(), cwd=ROOT)
+    ref = scene_dict("newmark", steps=5)
+    ref["material"] |= {"youngs_modulus": 1.3e4, "poisson_ratio": 0.25}
+    fem_anim.run(fem_anim.Scene.from_dict(ref), tmp_path / "ref").close()
+    r = subprocess.run([*mpirun, sys.executable, __file__, str(tmp_path / "ref")],
+                       capture_output=True, text=True, timeout=600, env=clean_environment(),
+                       cwd=ROOT)
     assert r.returncode == 0, r.stdout + r.stderr
     parallel = json.loads(r.stdout.strip().splitlines()[-1])
-    serial = mpi_gradient()
+    serial = mpi_gradient(str(tmp_path / "ref"))
     assert parallel["J"] == pytest.approx(serial["J"], rel=1e-8)
     np.testing.assert_allclose(parallel["grad"], serial["grad"], rtol=1e-8)
 
@@ -346,6 +353,6 @@ def test_two_ranks_give_the_serial_gradient():
 if __name__ == "__main__":
     from mpi4py import MPI
 
-    result = mpi_gradient()
+    result = mpi_gradient(sys.argv[1])
     if MPI.COMM_WORLD.rank == 0:
         print(json.dumps(result))
