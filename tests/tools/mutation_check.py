@@ -372,6 +372,16 @@ MUTATIONS: list[Mutation] = [
              "        fem_petsc.assemble_vector(vec, self.forms[name])\n",
              ("tests/test_adjoint.py::test_two_ranks_give_the_serial_gradient",),
              "the adjoint's vectors miss the ghost cells' contributions under MPI"),
+    Mutation("adjoint-trajectory-vertex-order", "fem_anim/adjoint/objectives.py",
+             "            r = u[self.dofs] - ref[self.index]",
+             "            r = u[self.dofs] - ref[self.dofs]",
+             ("tests/test_adjoint.py::test_trajectory_of_a_reference_run",),
+             "the reference run's vertices matched in dof order, not in input order"),
+    Mutation("adjoint-centre-of-mass-gradient", "fem_anim/adjoint/objectives.py",
+             "            du = (self.weight * r / self.total * self.m).reshape(-1)",
+             "            du = (self.weight * r * self.m).reshape(-1)",
+             ("tests/test_adjoint.py::test_gradient_equals_central_differences",),
+             "the centre of mass's derivative not divided by the total mass"),
 ]
 
 
