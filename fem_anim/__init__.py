@@ -4,7 +4,8 @@ Each time step is the minimisation x_{n+1} = argmin 1/2 ||x - y||_M^2 + w E(x) (
 3.1). From Python: make a :class:`Scene` (``Scene.load(path)``, ``Scene.from_toml(text)``,
 ``Scene.from_dict(d)``), :func:`run` it, and read the :class:`Run` (``run.times``,
 ``run.displacement(frame)``, ``run.stats``, ``run.energy``, ``run.summary``); read an earlier
-run with :func:`open_run`; drive the step loop yourself with :class:`Simulation`.
+run with :func:`open_run`; drive the step loop yourself with :class:`Simulation`; differentiate
+an objective of the motion with :func:`gradient` (:mod:`.adjoint`).
 
 The package is in concept folders, imported in this order: :mod:`.scene` -> :mod:`.mesh` ->
 :mod:`.problem` (energies from ``fem_anim.forms``) -> :mod:`.contact` -> :mod:`.solver` ->
@@ -22,6 +23,7 @@ _all, __getattr__, _dir = lazy_exports(__name__, {
     "open_run": "runs",
     "Run": "runs",
     "Simulation": "simulation.loop",
+    "gradient": "adjoint.differentiate",
     "SceneError": "errors",
     "FemAnimError": "errors",
     "ConvergenceError": "errors",

@@ -230,6 +230,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if app_args[:1] == ["bench"]:  # its own parser: argparse's REMAINDER drops --options
             return _bench(app_args[1:])
+        if app_args[:1] == ["fit"]:  # fem_anim.adjoint.command parses its own arguments
+            from fem_anim.adjoint.command import fit_command
+            return fit_command(app_args[1:], solver_options)
         args = build_parser().parse_args(app_args)
         if args.command == "solvers":
             from fem_anim.solver.presets import describe_presets

@@ -1,0 +1,266 @@
+"""The backward sweep: the discrete adjoint of the time-stepping (seed section 3.1, eq. 4).
+
+Step n solves R(x_{n+1}; y_n, d_n, theta) = grad_x g = 0 with g of seed eq. 4,
+
+    g(x) = 1/2 ||x - y_n||_M^2 + c_n/2 ||x - d_n||_C^2 + w_n E(x; theta),
+
+y_n the integrator's predictor and d_n its damping anchor, both linear in the state s_n
+(u, v, a and BDF2's u_{n-1}, v_{n-1}), and the new state s_{n+1} = U(s_n, x_{n+1}, y_n)
+linear too (:mod:`fem_anim.simulation.integrators`). With H = dR/dx the *exact* Hessian
+(never a projected or filtered one) at the converged x_{n+1}, the implicit function
+theorem gives dx_{n+1} = -H^-1 (R_y dy + R_d dd + R_theta dtheta). Going backwards, the
+adjoint s_bar_{n+1} of the state gives
+
+    x_bar = U_x^T s_bar_{n+1},   lambda = H^-1 x_bar   (zero on pinned dofs),
+    y_bar = U_y^T s_bar_{n+1} - R_y^T lambda,   d_bar = -R_d^T lambda,
+    theta_bar -= R_theta^T lambda,
+    s_bar_n = U_s^T s_bar_{n+1} + P^T y_bar + D^T d_bar   (+ the objective's dJ/ds_n).
+
+R_y^T lambda, R_d^T lambda and R_theta^T lambda are derivatives of the scalar form
+<R, lambda> (``ufl.action``) with respect to the Functions ``u_pred``, ``u_anchor`` and
+the material's stand-in coefficients (:mod:`fem_anim.adjoint.parameters`), assembled once
+per step; only H is a matrix (assembled and factorised once per step by PETSc KSP, a
+direct solver as the forward default). The scalar coefficients of the linear maps P, D
+and U are read off the integrator itself by applying it to unit one-entry states, so the
+sweep is the transpose of exactly the forward code. Newmark's a_0 solves
+M a_0 = -grad E(0) - C v_0 (seed eq. 1b) and is differentiated the same way, with M in
+place of H.
+
+Adjoint arrays are local dof arrays whose ghost entries equal their owners' (contributions
+are summed to the owners, then copied back to the ghosts), so the sweep is the same on any
+number of ranks.
+"""
+
+from __future__ import annotations
+
+import time
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fem_petsc
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fem_anim import compat
+from fem_anim.problem.form_compiler import compile_forms
+from fem_anim.simulation.integrators import State
+
+__all__ = ["BackwardSweep", "STATE_FIELDS", "linear_maps"]
+
+#: The state arrays the integrator carries, in the order of the linear maps.
+STATE_FIELDS = ("u", "v", "a", "u_old", "v_old")
+
+
+def _unit_state(inputs: tuple[str, ...], which: str | None) -> State:
+    """A one-entry state with 1 in field ``which`` and 0 elsewhere."""
+    arrays = {k: np.array([1.0 if k == which else 0.0]) for k in inputs}
+    return State(u=arrays["u"], v=arrays["v"], a=arrays["a"], u_old=arrays.get("u_old"),
+                 v_old=arrays.get("v_old"))
+
+
+def linear_maps(integrator, h: float, state: State) -> dict:
+    """The scalar coefficients of the predictor, damping anchor and update of one step.
+
+    Returns:
+        ``inputs`` (the state fields present), ``P`` (input -> coefficient of y),
+        ``D`` (input -> coefficient of d), ``U`` ((output, input) -> coefficient, the
+        inputs including ``"x"`` the step's solution and ``"y"`` the predictor).
+    """
+    inputs = ("u", "v", "a") + (("u_old", "v_old") if state.u_old is not None else ())
+    zero = np.zeros(1)
+    P = {k: float(integrator.predictor(h, _unit_state(inputs, k))[0]) for k in inputs}
+    D = {k: float(integrator.damping_anchor(h, _unit_state(inputs, k))[1][0]) for k in inputs}
+    U = {}
+    for k in (*inputs, "x", "y"):
+        new = integrator.update(h, _unit_state(inputs, k if k in inputs else None),
+                                np.array([1.0 if k == "x" else 0.0]),
+                                np.array([1.0 if k == "y" else 0.0]))
+        for out in STATE_FIELDS:
+            U[out, k] = float(getattr(new, out)[0])
+    return {"inputs": inputs, "P": P, "D": D, "U": U}
+
+
+class BackwardSweep:
+    """The adjoint's forms and solver for one problem (building it is collective).
+
+    Args:
+        problem: The :class:`~fem_anim.problem.objective.EnergyProblem` (displacement
+            formulation, no contact, no quadrature data).
+        parameters: Its :class:`~fem_anim.adjoint.parameters.ParameterSet`.
+        newmark: Whether a_0 is computed from the equations of motion (Newmark).
+    """
+
+    def __init__(self, problem, parameters, newmark: bool):
+        p = self.problem = problem
+        self.parameters = parameters
+        rep = parameters.replacements
+        coefficients = parameters.coefficients
+        V = p.V
+        dv, du = ufl.TestFunction(V), ufl.TrialFunction(V)
+        self.lam = fem.Function(V, name="adjoint")
+        self.work = fem.Function(V, name="adjoint_work")
+        g = ufl.replace(p.ufl_objective, rep)
+        R = ufl.derivative(g, p.u, dv)
+        L = ufl.action(R, self.lam)
+        forms = {"hessian": ufl.derivative(R, p.u, du),  # exact: no filter, no projection
+                 "y": ufl.derivative(L, p.u_pred, dv)}
+        if p.damped:
+            forms["d"] = ufl.derivative(L, p.u_anchor, dv)
+        for name, f in coefficients.items():
+            forms[f"theta_{name}"] = ufl.derivative(L, f, parameters.one)
+        self.newmark = newmark
+        if newmark:  # r0(a) = grad E(0) + C v_0 + M a = 0, and its action on mu
+            self.a0 = fem.Function(V, name="initial_acceleration")
+            potential = p._elastic_energy(p.u)
+            if p.g is not None:
+                from fem_anim.forms import gravity as gravity_forms
+                potential = potential + gravity_forms.gravity_potential(p.u, p.rho, p.g,
+                                                                        p.dx_load)
+            r0 = ufl.derivative(potential, p.u, dv) + \
+                p.rho * ufl.inner(self.a0, dv) * p.dx_mass
+            if p.damped:
+                zero = ufl.as_vector([0.0] * p.d)
+                r0 = r0 + ufl.derivative(p._dissipation(p.v, zero, 1.0), p.v, dv)
+            L0 = ufl.action(ufl.replace(r0, rep), self.lam)
+            forms["v0"] = ufl.derivative(L0, p.v, dv)
+            for name, f in coefficients.items():
+                forms[f"theta0_{name}"] = ufl.derivative(L0, f, parameters.one)
+            forms["mass"] = ufl.replace(p.rho * ufl.inner(du, dv) * p.dx_mass, rep)
+        self.forms = compile_forms(forms)  # one FFCx module
+        self.H = fem_petsc.create_matrix(self.forms["hessian"])
+        self.b = compat.petsc_vec(self.work).duplicate()
+        self.x = self.b.duplicate()
+        self.ksp = PETSc.KSP().create(p.comm)
+        self.ksp.setOptionsPrefix("fem_anim_adjoint_")
+        self.ksp.setType("preonly")
+        self.ksp.getPC().setType("lu")
+        self.ksp.getPC().setFactorSolverType("mumps")
+        self.ksp.setFromOptions()
+        self.pinned = np.concatenate([bc.dof_indices()[0] for bc in p.displacement_bcs] +
+                                     [np.empty(0, np.int32)])
+        self.owned = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+        #: Wall time (s) of the last sweep's Hessian assemblies and factorisations + solves.
+        self.solve_s = {"assembly": 0.0, "solve": 0.0}
+
+    # -- helpers ------------------------------------------------------------------------
+    def consistent(self, local: np.ndarray) -> np.ndarray:
+        """Sum ghost contributions into their owners and copy the sums back to the ghosts."""
+        self.work.x.array[:] = local
+        vec = compat.petsc_vec(self.work)
+        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        return self.work.x.array.copy()
+
+    def vector(self, name: str) -> np.ndarray:
+        """A vector form assembled, as a consistent local array."""
+        vec = compat.petsc_vec(self.work)
+        with vec.localForm() as loc:
+            loc.set(0.0)
+        fem_petsc.assemble_vector(vec, self.forms[name])
+        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        return self.work.x.array.copy()
+
+    def scalar(self, name: str) -> float:
+        """A scalar form summed over all ranks."""
+        return self.problem.comm.allreduce(fem.assemble_scalar(self.forms[name]), op=MPI.SUM)
+
+    def dot(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Sum of a * b over the owned dofs of all ranks."""
+        n = self.owned
+        return self.problem.comm.allreduce(float(a[:n] @ b[:n]), op=MPI.SUM)
+
+    def solve(self, form: str, rhs: np.ndarray) -> None:
+        """lambda = A^-1 rhs into ``lam``, A the form with the pins' rows and columns
+        replaced by the identity, rhs zero on pinned dofs (collective)."""
+        start = time.perf_counter()
+        self.H.zeroEntries()
+        fem_petsc.assemble_matrix(self.H, self.forms[form], bcs=self.problem.displacement_bcs)
+        self.H.assemble()
+        mid = time.perf_counter()
+        rhs = rhs.copy()
+        rhs[self.pinned] = 0.0
+        self.b.array[:] = rhs[: self.owned]
+        self.ksp.setOperators(self.H)
+        self.ksp.solve(self.b, self.x)
+        self.x.copy(compat.petsc_vec(self.lam))
+        compat.petsc_vec(self.lam).ghostUpdate(addv=PETSc.InsertMode.INSERT,
+                                               mode=PETSc.ScatterMode.FORWARD)
+        self.solve_s["assembly"] += mid - start
+        self.solve_s["solve"] += time.perf_counter() - mid
+
+    def material_bar(self, prefix: str) -> dict[str, float]:
+        """-d<R, lambda>/dtheta for each material parameter, by the chain rule."""
+        partial = {name: self.scalar(f"{prefix}_{name}")
+                   for name in self.parameters.coefficients}
+        out = {}
+        for name in self.parameters.names:
+            direction = self.parameters.material_direction(name)
+            if direction is None:
+                continue
+            out[name] = -sum(factor * partial[c] for c, factor in direction.terms)
+        return out
+
+    # -- the sweep ----------------------------------------------------------------------
+    def run(self, sim, tape, state_bars: list[dict]) -> np.ndarray:
+        """dJ/dtheta from the adjoint of each state (collective).
+
+        Args:
+            sim: The :class:`~fem_anim.simulation.loop.Simulation` of the forward run.
+            tape: Its :class:`~fem_anim.adjoint.tape.Tape`.
+            state_bars: For each state n, the objective's dJ/ds_n (field -> consistent local
+                array; absent fields are zero). Modified in place.
+
+        Returns:
+            The gradient, in the order of the parameters' names.
+        """
+        p, integ, h = self.problem, sim.integrator, tape.h
+        self.solve_s = {"assembly": 0.0, "solve": 0.0}
+        names = self.parameters.names
+        grad = dict.fromkeys(names, 0.0)
+        zero = np.zeros_like(tape.states[0].u)
+        for n in range(tape.steps - 1, -1, -1):
+            start, end = tape.states[n], tape.states[n + 1]
+            bar = {k: state_bars[n + 1].get(k, zero) for k in STATE_FIELDS}
+            maps = linear_maps(integ, h, start)
+            U = maps["U"]
+            x_bar = sum(U[o, "x"] * bar[o] for o in STATE_FIELDS)
+            y_bar = sum(U[o, "y"] * bar[o] for o in STATE_FIELDS)
+            s_bar = {k: sum(U[o, k] * bar[o] for o in STATE_FIELDS) for k in maps["inputs"]}
+            # the step's objective as the forward staged it, at its solution
+            u_pred = integ.predictor(h, start)
+            damping = integ.damping_anchor(h, start) if p.damped else None
+            p.stage(start.u, u_pred, integ.weight(h, start), start.time + h, h, damping)
+            p.u.x.array[:] = end.u
+            self.solve("hessian", x_bar)
+            y_bar = y_bar - self.vector("y")
+            for name, value in self.material_bar("theta").items():
+                grad[name] += value
+            d_bar = -self.vector("d") if p.damped else None
+            target = state_bars[n]
+            for k in maps["inputs"]:
+                total = s_bar[k] + maps["P"][k] * y_bar
+                if d_bar is not None:
+                    total = total + maps["D"][k] * d_bar
+                target[k] = target.get(k, zero) + total
+        v_bar = state_bars[0].get("v", zero)
+        if self.newmark:
+            v_bar = v_bar + self._initial_acceleration(tape.states[0], state_bars[0], grad)
+        for name in names:
+            basis = self.parameters.velocity_basis(name, p)
+            if basis is not None:
+                grad[name] += self.dot(v_bar, basis)
+        return np.array([grad[name] for name in names])
+
+    def _initial_acceleration(self, state: State, bar: dict, grad: dict) -> np.ndarray:
+        """Back through M a_0 = -grad E(0) - C v_0: adds theta's part to ``grad`` and
+        returns v_0's."""
+        p = self.problem
+        a_bar = bar.get("a", np.zeros_like(state.u)).copy()
+        p.u.x.array[:] = state.u
+        p.v.x.array[:] = state.v
+        self.a0.x.array[:] = state.a
+        self.solve("mass", a_bar)
+        for name, value in self.material_bar("theta0").items():
+            grad[name] += value
+        return -self.vector("v0")

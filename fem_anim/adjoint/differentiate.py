@@ -1,0 +1,159 @@
+"""J(theta) of a simulated motion and its gradient: forward run, then the backward sweep.
+
+:class:`AdjointModel` builds a scene's :class:`~fem_anim.simulation.loop.Simulation` once,
+with its parameters bound (:mod:`fem_anim.adjoint.parameters`) and the adjoint's forms
+compiled (:mod:`fem_anim.adjoint.backward`); :meth:`AdjointModel.evaluate` then runs the
+forward steps at a parameter vector theta (each step the minimisation of seed eq. 4,
+converged tightly: the derivative of a step holds at its stationary point only), keeps the
+states (:mod:`fem_anim.adjoint.tape`), evaluates the objective
+(:mod:`fem_anim.adjoint.objectives`) and sweeps back for dJ/dtheta. :func:`gradient` is the
+one-call form at the scene's own values.
+
+What is differentiated: implicit Euler, BDF2 and Newmark; the displacement formulation with
+one material whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...);
+gravity, Rayleigh damping, pins and moving handles. Refused with one line (a
+:class:`~fem_anim.errors.FemAnimError`): contact (obstacles, IPC), the mixed formulation,
+symplectic Euler, materials computing quadrature data outside UFL (corotated in 3D), regions and
+bodies.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+from fem_anim.adjoint.backward import BackwardSweep
+from fem_anim.adjoint.parameters import ParameterSet
+from fem_anim.adjoint.tape import Tape, record_forward
+from fem_anim.errors import FemAnimError
+
+__all__ = ["ADJOINT_OPTIONS", "AdjointModel", "gradient"]
+
+#: The forward solver's tolerances while differentiating (below the command line's options):
+#: each step converged far below the derivative's accuracy.
+ADJOINT_OPTIONS = {"snes_rtol": "1e-12", "snes_atol": "1e-13"}
+
+
+def check_differentiable(scene) -> None:
+    """Refuse, with one line, what the adjoint does not cover.
+
+    Raises:
+        FemAnimError: naming the scene feature.
+    """
+    refused = [("obstacle", "obstacles"), ("contact", "IPC contact"), ("body", "[[body]]"),
+               ("region", "[[region]]")]
+    for key, what in refused:
+        if scene.get(key):
+            raise FemAnimError(f"gradient: scenes with {what} are not differentiable yet "
+                               "(contact and friction are outside the adjoint)")
+    if scene["element"].get("formulation", "displacement") == "mixed":
+        raise FemAnimError("gradient: element.formulation = \"mixed\" is not differentiable yet")
+    if scene["time"]["integrator"] not in ("implicit_euler", "bdf2", "newmark"):
+        raise FemAnimError(f"gradient: time.integrator = {scene['time']['integrator']!r} is "
+                           "not differentiable (implicit_euler, bdf2 or newmark)")
+    if scene["solver"]["mode"] != "exact":
+        raise FemAnimError("gradient: solver.mode must be \"exact\" (a preview step is not "
+                           "converged, so it has no derivative)")
+
+
+class AdjointModel:
+    """A scene ready to be run and differentiated many times (building it is collective).
+
+    Args:
+        scene: A validated :class:`~fem_anim.scene.schema.Scene`.
+        params: Scene keys of the parameters (:func:`~fem_anim.adjoint.parameters.expand_keys`).
+        comm: MPI communicator.
+        cli_options: PETSc options above :data:`ADJOINT_OPTIONS`.
+        steps: Number of steps (default ``time.steps``); the step is ``time.dt``.
+
+    Raises:
+        FemAnimError: a scene feature or parameter the adjoint does not cover.
+    """
+
+    def __init__(self, scene, params: list[str], comm: MPI.Comm = MPI.COMM_WORLD,
+                 cli_options: dict[str, str] | None = None, steps: int | None = None):
+        from fem_anim.simulation.loop import Simulation
+
+        check_differentiable(scene)
+        self.scene = scene
+        self.sim = Simulation(scene, comm, cli_options=ADJOINT_OPTIONS | (cli_options or {}))
+        self.problem = p = self.sim.problem
+        if p.quadrature_data:
+            raise FemAnimError(f"gradient: material.model = {scene['material']['model']!r} "
+                               "computes quadrature data outside UFL; not differentiable yet")
+        self.parameters = ParameterSet(p, scene, params)
+        self.sweep = BackwardSweep(p, self.parameters, self.sim.integrator.name == "newmark")
+        self.steps = int(scene["time"]["steps"] if steps is None else steps)
+        self.h = float(scene["time"]["dt"])
+        self.tape: Tape | None = None
+        #: Wall time (s) of the last evaluation's forward run and backward sweep.
+        self.timing = {"forward": 0.0, "backward": 0.0}
+        self._bound: set[int] = set()
+
+    @property
+    def names(self) -> list[str]:
+        """The scalar parameters, in the order of theta."""
+        return self.parameters.names
+
+    def forward(self, theta=None, objective=None) -> float | None:
+        """Run forward at ``theta`` (default: the current values) and return J (or None)."""
+        if theta is not None:
+            self.parameters.assign(theta)
+        self.tape = record_forward(self.sim, self.parameters, self.steps, self.h)
+        self.timing["forward"] = self.tape.forward_s
+        if objective is None:
+            return None
+        self.bind(objective)
+        return objective.terms(self.tape)[0]
+
+    def evaluate(self, theta, objective) -> tuple[float, np.ndarray]:
+        """J(theta) and dJ/dtheta (collective; the same on every rank).
+
+        Raises:
+            ConvergenceError: a forward step did not converge (the gradient is undefined).
+        """
+        self.parameters.assign(theta)
+        self.tape = record_forward(self.sim, self.parameters, self.steps, self.h)
+        self.timing["forward"] = self.tape.forward_s
+        self.bind(objective)
+        start = time.perf_counter()
+        value, bars = objective.terms(self.tape)
+        state_bars = [{} for _ in self.tape.states]
+        for n, fields in bars.items():
+            state_bars[n] = {k: self.sweep.consistent(a) for k, a in fields.items()}
+        grad = self.sweep.run(self.sim, self.tape, state_bars)
+        self.timing["backward"] = time.perf_counter() - start
+        return float(value), grad
+
+    def bind(self, objective) -> None:
+        """Prepare an objective for this model, once (collective; raises its bad input,
+        e.g. a target run on another mesh)."""
+        if id(objective) not in self._bound:
+            objective.bind(self)
+            self._bound.add(id(objective))
+
+
+def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORLD,
+             cli_options: dict[str, str] | None = None) -> tuple[float, dict[str, float]]:
+    """J and dJ/dtheta at the scene's own parameter values (collective).
+
+    Args:
+        scene: A validated :class:`~fem_anim.scene.schema.Scene` (``time.steps`` steps of
+            ``time.dt`` are run).
+        objective: An :class:`~fem_anim.adjoint.objectives.Objective`.
+        params: Scene keys, e.g. ``["material.youngs_modulus", "initial.velocity"]``.
+        comm: MPI communicator.
+        cli_options: PETSc options for the forward solver.
+
+    Returns:
+        J, and {parameter name: dJ/dparameter}.
+
+    Raises:
+        FemAnimError: a parameter the scene does not have or a feature not covered.
+        ConvergenceError: a forward step did not converge.
+    """
+    model = AdjointModel(scene, params, comm, cli_options)
+    value, grad = model.evaluate(model.parameters.values(), objective)
+    return value, dict(zip(model.names, map(float, grad)))
