@@ -9,6 +9,7 @@ Usage::
     fem-anim solvers
     fem-anim bench [SCENE.toml] [--sweep KEY=V1,V2,...]... [--repeats N] [--reference KEY=V]...
                    [-o OUTDIR] | --extremes [--full] | --perf ... | --hard [--reduced]
+    fem-anim fit [SCENE.toml] --target RUN --param KEY [--param KEY ...] [--bounds ...] [-o OUTDIR]
 
 ``run`` simulates a scene (each time step minimises the step objective g(x) of seed
 section 3.1, eq. 4) and writes its run directory; ``render`` draws a saved run again;
@@ -71,6 +72,10 @@ def build_parser() -> argparse.ArgumentParser:
                            "--extremes (stability suite), --perf (performance bench) or "
                            "--hard (hard scenes x Hessian modes)")
     bench.add_argument("bench_args", nargs=argparse.REMAINDER)
+    fit = sub.add_parser("fit", add_help=False,
+                         help="fit scene parameters to a reference run by the discrete adjoint "
+                         "(SCENE --target RUN --param KEY ...; -h for its options)")
+    fit.add_argument("fit_args", nargs=argparse.REMAINDER)
     return parser
 
 
