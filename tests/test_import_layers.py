@@ -91,3 +91,15 @@ def test_only_main_imports_the_command_line():
 def test_the_check_finds_a_cycle():
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_every_package_folder_is_installed():
+    """pyproject.toml lists every folder of the package (a folder left out is missing from a
+    non-editable install, although an editable one still finds it)."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+                 ["packages"])
+    folders = {module_name(init) for folder in PACKAGES for init in folder.rglob("__init__.py")
+               if "__pycache__" not in init.parts}
+    assert folders == listed
