@@ -1,8 +1,9 @@
 """Output: what a run leaves on disk and where its numbers came from.
 
 :mod:`~fem_anim.output.files` gathers displacements and cell values to rank 0 in input order
-and writes the trajectory (XDMF + HDF5), ``stats.csv``, ``final.vtu`` and ``scene.json``
-through a staging area; :mod:`~fem_anim.output.rundir` marks, locks and installs a run
+and writes ``stats.csv``, ``final.vtu`` and ``scene.json`` through a staging area;
+:mod:`~fem_anim.output.trajectory` writes the trajectory (XDMF + HDF5) so that a kill at any
+moment leaves it continuable; :mod:`~fem_anim.output.rundir` marks, locks and installs a run
 directory so fem_anim only ever replaces files it wrote; :mod:`~fem_anim.output.provenance`
 records the software stack and the wall time per phase for ``summary.json``. Public names
 load lazily.
@@ -16,7 +17,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "RunDirectory": "files",
     "STATS_COLUMNS": "files",
     "StatsWriter": "files",
-    "TrajectoryWriter": "files",
+    "TrajectoryWriter": "trajectory",
     "VertexGather": "files",
     "write_atomically": "rundir",
     "write_final": "files",
