@@ -56,6 +56,8 @@ def extra_couplings(A: PETSc.Mat, V, keys: np.ndarray) -> np.ndarray | None:
         elsewhere.
     """
     comm = A.getComm().tompi4py()
+    if not A.assembled:  # no Newton iteration yet: nothing grew
+        return np.zeros((0, 2), np.int64) if comm.rank == 0 else None
     bs = V.dofmap.index_map_bs
     n_global = V.dofmap.index_map.size_global
     indptr, cols, _ = A.getValuesCSR()

@@ -119,8 +119,9 @@ def _restore(sim, stepper: AdaptiveStepper, ck: Checkpoint) -> None:
     p = sim.problem
     if p.ipc is not None:
         p.ipc.restore(ck.contact)
-    if ck.pressure is not None:
+    if ck.pressure is not None:  # the unknown (u, p) as the last step left it
         p.fields.w.x.array[p.fields.p_dofs] = ck.pressure
+        p.fields.set_displacement(ck.state.u)
         p.p.x.array[:] = ck.pressure
     p.u.x.array[:] = ck.state.u
     p.v.x.array[:] = ck.state.v
