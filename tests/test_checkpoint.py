@@ -201,18 +201,31 @@ def _interrupt_at(sim, step: int) -> None:
     sim.timed_step = timed_step
 
 
-def resumed_equals_uninterrupted(tmp_path, scene, stop: int, resumed_scene=None):
+def resumed_equals_uninterrupted(tmp_path, scene, stop: int, probe=None, seen=None):
     """Run ``scene`` whole; again, interrupted after ``stop`` steps and resumed (in this
-    process, each run its own Simulation). Returns both results."""
+    process, each run its own Simulation). Returns both results. With ``probe``, append
+    ``probe(sim)`` to ``seen`` for the interrupted Simulation once it stopped and for the
+    resumed one before its first step."""
     from fem_anim.errors import Interrupted
     from fem_anim.simulation.loop import Simulation
 
     whole = Simulation(scene).run(tmp_path / "whole", quiet=True)
-    sim = Simulation(scene)
-    _interrupt_at(sim, stop)
+    cut = Simulation(scene)
+    _interrupt_at(cut, stop)
     with pytest.raises(Interrupted):
-        sim.run(tmp_path / "cut", quiet=True)
-    resumed = Simulation(resumed_scene or scene).run(tmp_path / "cut", quiet=True, resume=True)
+        cut.run(tmp_path / "cut", quiet=True)
+    sim = Simulation(scene)
+    if probe is not None:
+        seen.append(probe(cut))
+        take = sim.timed_step
+
+        def timed_step(state, dt):
+            if len(seen) == 1:
+                seen.append(probe(sim))
+            return take(state, dt)
+
+        sim.timed_step = timed_step
+    resumed = sim.run(tmp_path / "cut", quiet=True, resume=True)
     return whole, resumed
 
 
@@ -244,8 +257,11 @@ def test_contact_resume_inside_an_impact_is_bit_for_bit(tmp_path):
     """IPC's adaptive stiffness, the friction lagged at the step start and the Hessian's
     pattern grown by the contact pairs met so far continue as they were."""
     scene = _scene(tmp_path, CUBES)
-    whole, resumed = resumed_equals_uninterrupted(tmp_path, scene, stop=3)
+    floors = []  # IPC's floor of the adaptive kappa: when stopped, and when resumed
+    whole, resumed = resumed_equals_uninterrupted(
+        tmp_path, scene, stop=3, probe=lambda sim: sim.problem.ipc.kappa_floor, seen=floors)
     assert int(whole.rows[2]["contact_pairs"]) > 0 and int(whole.rows[3]["contact_pairs"]) > 0
+    assert floors[0] > 0.0 and floors[1] == floors[0]
     assert_same_run(whole, resumed)
 
 
