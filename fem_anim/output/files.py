@@ -7,7 +7,8 @@ run. Everything is written into a staging directory ``OUTDIR/.partial`` and move
 file posing as a result, and keeps its staging area for ``--resume``.
 
 Files: ``trajectory.xdmf`` + ``trajectory.h5`` (displacement and cell energy density
-per frame, ParaView and meshio read it; :mod:`fem_anim.output.trajectory`), ``stats.csv`` (one row per step), ``final.vtu``
+per frame, ParaView and meshio read it; written by :mod:`fem_anim.output.trajectory`),
+``stats.csv`` (one row per step), ``final.vtu``
 (point data ``displacement``, cell data ``energy_density``), ``scene.json`` (the validated
 scene) and, from :mod:`fem_anim.render.animation` and :mod:`fem_anim.render.plots`, the
 pictures in :data:`RENDER_PRODUCTS`.
@@ -30,7 +31,8 @@ from fem_anim.mesh.simplex import SimplexMesh
 from fem_anim.output.rundir import (RENDER_PRODUCTS, STAGING, claim, install, read_manifest,
                                     write_atomically)
 
-__all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS"]
+__all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "write_final",
+           "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS"]
 
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "initial_residual_norm", "newton_decrement", "shift",
