@@ -321,11 +321,11 @@ def describe_resume(ck: Checkpoint, sim, path: Path) -> str:
     """
     steps = sim.scene["time"]["steps"]
     where = f"resuming {path} at frame {ck.frame} of {steps} (t = {ck.state.time:.6g} s)"
+    if not ck.solver:
+        return f"{where} (its checkpoint does not record the solver settings)"
     now = _solver_settings(sim)
     changed = _changes({"solver": ck.solver.get("solver", {})}, {"solver": now["solver"]}) + \
         _changes({"petsc": ck.solver.get("petsc", {})}, {"petsc": now["petsc"]})
-    if not ck.solver:
-        return f"{where} (its checkpoint does not record the solver settings)"
     if not changed:
         return f"{where} with the same solver settings"
     return f"{where} with changed solver settings: {', '.join(changed)}"
