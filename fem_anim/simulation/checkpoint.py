@@ -181,6 +181,7 @@ def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: i
     meta = {"scene": scene_hash(sim.scene), "physics": physics_data(sim.scene),
             "solver": _solver_settings(sim), "time": state.time, "step": state.step,
             "frame": frame, "frames_written": frames_written, "stepper": stepper,
+            "every": sim.scene["output"]["every"],
             "shift": shift, "rows": rows, "contact": ipc.state() if ipc is not None else {}}
     buffer = io.BytesIO()
     np.savez(buffer, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
@@ -209,6 +210,8 @@ def _invalid(meta, data: dict, sim) -> str | None:
             not isinstance(meta.get("rows"), list) or not isinstance(meta.get("stepper"), dict):
         return "its record of the run is incomplete"
     frame, step, written = meta["frame"], meta["step"], meta["frames_written"]
+    if type(meta.get("every")) is int and meta["every"] >= 1:  # output.every may change
+        every = meta["every"]
     if not 1 <= frame < steps:
         return f"frame {frame} is outside 1..{steps - 1} (time.steps = {steps})"
     if not math.isclose(meta["time"], frame * h, rel_tol=1e-9, abs_tol=1e-9 * h):
