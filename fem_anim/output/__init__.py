@@ -1,8 +1,9 @@
 """Output: what a run leaves on disk and where its numbers came from.
 
 :mod:`~fem_anim.output.files` gathers displacements and cell values to rank 0 in input order
-and writes the trajectory (XDMF + HDF5), ``stats.csv``, ``final.vtu`` and ``scene.json``
-through a staging area; :mod:`~fem_anim.output.rundir` marks, locks and installs a run
+and writes ``stats.csv``, ``final.vtu`` and ``scene.json`` through a staging area;
+:mod:`~fem_anim.output.trajectory` writes the trajectory (XDMF + HDF5) so that a kill at any
+moment leaves it continuable; :mod:`~fem_anim.output.rundir` marks, locks and installs a run
 directory so fem_anim only ever replaces files it wrote, and
 :mod:`~fem_anim.output.products` keeps that promise for every other command writing into
 a folder a user names; :mod:`~fem_anim.output.provenance`
@@ -19,7 +20,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "STATS_COLUMNS": "files",
     "StatsWriter": "files",
     "body_numbers": "files",
-    "TrajectoryWriter": "files",
+    "TrajectoryWriter": "trajectory",
     "VertexGather": "files",
     "write_atomically": "rundir",
     "write_final": "files",

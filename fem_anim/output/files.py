@@ -7,10 +7,11 @@ run. Everything is written into a staging directory ``OUTDIR/.partial`` and move
 file posing as a result, and keeps its staging area for ``--resume``.
 
 Files: ``trajectory.xdmf`` + ``trajectory.h5`` (displacement and cell energy density
-per frame, the cells' ``body`` number, ParaView and meshio read it), ``stats.csv`` (one row
-per step), ``final.vtu`` (point data ``displacement``, cell data ``energy_density`` and
-``body``), ``scene.json`` (the validated scene) and, from :mod:`fem_anim.render.animation`
-and :mod:`fem_anim.render.plots`, the pictures in :data:`RENDER_PRODUCTS`.
+per frame and the cells' ``body`` number, ParaView and meshio read it; written by
+:mod:`fem_anim.output.trajectory`), ``stats.csv`` (one row per step), ``final.vtu`` (point
+data ``displacement``, cell data ``energy_density`` and ``body``), ``scene.json`` (the
+validated scene) and, from :mod:`fem_anim.render.animation` and :mod:`fem_anim.render.plots`,
+the pictures in :data:`RENDER_PRODUCTS`.
 """
 
 from __future__ import annotations
@@ -31,9 +32,8 @@ from fem_anim.mesh.simplex import SimplexMesh
 from fem_anim.output.rundir import (RENDER_PRODUCTS, STAGING, claim, install, read_manifest,
                                     write_atomically)
 
-__all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "TrajectoryWriter",
-           "write_final", "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS",
-           "body_numbers"]
+__all__ = ["VertexGather", "CellGather", "RunDirectory", "StatsWriter", "write_final",
+           "write_scene", "write_atomically", "STATS_COLUMNS", "RENDER_PRODUCTS", "body_numbers"]
 
 STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "snes_reason",
                  "residual_norm", "initial_residual_norm", "newton_decrement", "shift",
@@ -263,122 +263,6 @@ class StatsWriter:
             try:
                 self._file.close()
             except OSError:
-                pass
-
-
-class TrajectoryWriter:
-    """``trajectory.xdmf`` + ``.h5``: displacement and energy density per frame (rank 0).
-
-    The layout is meshio's (``data0`` points, ``data1`` cells, ``data{k+2}`` frame k's
-    vertex displacements, plus ``energy_density{k}`` its cells' mean psi), so meshio's
-    TimeSeriesReader and ParaView read it. Each frame is flushed to the HDF5 file
-    and the small XDMF file is rewritten atomically, listing only complete frames: after
-    a kill between frames the pair is readable, and ``keep_frames`` continues it.
-
-    Args:
-        path: The ``.xdmf`` file; the HDF5 file sits beside it with suffix ``.h5``.
-        domain: The mesh (its input points and cells are written once).
-        keep_frames: None for a new file; for a resumed run, the number of frames of the
-            existing file to keep (later ones are dropped).
-
-    Raises:
-        OSError: (rank 0) if a resumed file holds fewer than ``keep_frames`` frames.
-    """
-
-    CELL_TYPES = {3: ("triangle", "Triangle"), 4: ("tetra", "Tetrahedron")}
-
-    def __init__(self, path: Path, domain: SimplexMesh, keep_frames: int | None = None):
-        self.rank0 = domain.mesh.comm.rank == 0
-        self.path = Path(path)
-        self.h5_path = self.path.with_suffix(".h5")
-        self.times: list[float] = []
-        self.h5 = None
-        if not self.rank0:
-            return
-        import h5py
-
-        self.points = _pad3(domain.points)
-        self.cells = domain.cells
-        if keep_frames is None:
-            self.h5 = h5py.File(self.h5_path, "w")
-            self.h5.create_dataset("data0", data=self.points)
-            self.h5.create_dataset("data1", data=self.cells)
-            self.h5.create_dataset("body", data=body_numbers(self.cells))
-        else:  # continue a run: keep its first frames, drop the rest
-            self.h5 = h5py.File(self.h5_path, "a")
-            stored = self.h5.attrs.get("times", np.zeros(0))
-            if len(stored) < keep_frames or any(f"data{k + 2}" not in self.h5
-                                                for k in range(keep_frames)):
-                self.h5.close()
-                self.h5 = None
-                raise OSError(0, f"holds {len(stored)} frames where the checkpoint expects "
-                              f"{keep_frames} (the run cannot be continued from it)",
-                              str(self.h5_path))
-            self.times = [float(t) for t in stored[:keep_frames]]
-            if "body" not in self.h5:  # a run begun before the cells had their body
-                self.h5.create_dataset("body", data=body_numbers(self.cells))
-            for k in range(keep_frames, len(self.h5.attrs["times"])):
-                del self.h5[f"data{k + 2}"]
-                if f"energy_density{k}" in self.h5:
-                    del self.h5[f"energy_density{k}"]
-            self._sync()
-
-    def write(self, time: float, displacement: np.ndarray | None,
-              energy_density: np.ndarray | None) -> None:
-        """Append a frame (rank 0 writes; other ranks pass None).
-
-        Args:
-            time: The frame's time (s).
-            displacement: Vertex displacements (num_points, gdim) in input order.
-            energy_density: Each cell's mean energy density (num_cells,) in input order.
-        """
-        if not self.rank0:
-            return
-        k = len(self.times)
-        self.h5.create_dataset(f"energy_density{k}", data=energy_density)
-        self.h5.create_dataset(f"data{k + 2}", data=_pad3(displacement))
-        self.times.append(time)
-        self._sync()
-
-    def _sync(self) -> None:
-        self.h5.attrs["times"] = np.asarray(self.times)
-        self.h5.flush()
-        write_atomically(self.path, self._xdmf().encode())
-
-    def _xdmf(self) -> str:
-        h5 = self.path.with_suffix(".h5").name
-        n, m = self.points.shape[0], self.cells.shape[0]
-        topology = self.CELL_TYPES[self.cells.shape[1]][1]
-        mesh = ('xpointer(//Grid[@Name=&quot;mesh&quot;]/*[self::Topology or '
-                'self::Geometry])')
-        frames = "".join(
-            f'<Grid><xi:include xpointer="{mesh}" /><Time Value="{t!r}" />'
-            f'<Attribute Name="displacement" AttributeType="Vector" Center="Node">'
-            f'<DataItem DataType="Float" Dimensions="{n} 3" Format="HDF" Precision="8">'
-            f"{h5}:/data{k + 2}</DataItem></Attribute>"
-            f'<Attribute Name="energy_density" AttributeType="Scalar" Center="Cell">'
-            f'<DataItem DataType="Float" Dimensions="{m}" Format="HDF" Precision="8">'
-            f"{h5}:/energy_density{k}</DataItem></Attribute>"
-            f'<Attribute Name="body" AttributeType="Scalar" Center="Cell">'
-            f'<DataItem DataType="Int" Dimensions="{m}" Format="HDF" Precision="8">'
-            f"{h5}:/body</DataItem></Attribute></Grid>"
-            for k, t in enumerate(self.times))
-        return (
-            '<Xdmf xmlns:xi="http://www.w3.org/2003/XInclude" Version="3.0"><Domain>'
-            '<Grid Name="TimeSeries_fem_anim" GridType="Collection" CollectionType="Temporal">'
-            f'{frames}</Grid><Grid Name="mesh" GridType="Uniform"><Geometry GeometryType="XYZ">'
-            f'<DataItem DataType="Float" Dimensions="{n} 3" Format="HDF" Precision="8">'
-            f'{h5}:/data0</DataItem></Geometry><Topology TopologyType="{topology}" '
-            f'NumberOfElements="{m}"><DataItem DataType="Int" Dimensions="{m} '
-            f'{self.cells.shape[1]}" Format="HDF" Precision="8">{h5}:/data1</DataItem>'
-            "</Topology></Grid></Domain></Xdmf>\n")
-
-    def close(self) -> None:
-        """Close the HDF5 file; after a failed write (a full disk) its error was reported."""
-        if self.rank0 and self.h5 is not None:
-            try:
-                self.h5.close()
-            except (OSError, RuntimeError):
                 pass
 
 

@@ -3,14 +3,21 @@
 Every ``output.checkpoint_every`` frames rank 0 writes ``checkpoint.npz`` atomically
 (temp file, fsync, rename: a kill leaves the previous checkpoint or the new one, never a
 half-written file). It holds the state arrays in global dof order (u, v, a and, for BDF2,
-u_{n-1}, v_{n-1}), time, step and frame counters, the adaptive time-step state, the
-Hessian shift, the number of trajectory frames written and the stats rows so far. A
-resumed run therefore repeats exactly the arithmetic of an uninterrupted one.
+u_{n-1}, v_{n-1}; the pressure of the mixed formulation, Newton's start for its next
+step), time, step and frame counters, the adaptive time-step state, the Hessian shift,
+the contact's state across steps (IPC's adaptive barrier stiffness), the number of
+trajectory frames written, the stats rows so far, the scene's physics and the solver
+settings. A resumed run therefore repeats exactly the arithmetic of an uninterrupted one
+when the solver settings are the same (:doc:`/resume`).
 
-Dofs are keyed by their coordinates (quantised to 1e-9 of the mesh extent), not by the
-global dof numbering, which depends on the mesh partition and is not reproducible between
-parallel runs: a checkpoint resumes on any number of processes. The scene must be the same
-(its validated data are hashed).
+Dofs are keyed by identity, not by the global dof numbering (which depends on the mesh
+partition): a dof at a vertex by the vertex's row in the input mesh (DOLFINx keeps it as
+``geometry.input_global_indices``), a dof on an edge (P2) by its two vertices' rows. A
+checkpoint therefore resumes on any number of processes and at any scene extent.
+
+The physics must be the same: every key but ``[solver]``, ``[output]`` and ``[render]``
+(a change is refused, naming the key). The solver settings may change; :func:`describe_resume`
+says which ones the resumed run continues with.
 """
 
 from __future__ import annotations
@@ -25,20 +32,49 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fem_anim import compat
 from fem_anim.errors import FemAnimError
+from fem_anim.output.rundir import write_atomically
+from fem_anim.simulation.hessian_pattern import extra_couplings, restore_couplings
 from fem_anim.simulation.integrators import State
-from fem_anim.output.files import write_atomically
 
-__all__ = ["Checkpoint", "save_checkpoint", "load_checkpoint", "scene_hash"]
+__all__ = ["Checkpoint", "save_checkpoint", "load_checkpoint", "scene_hash", "physics_data",
+           "dof_identity", "describe_resume", "restore_pattern", "NOT_PHYSICS"]
 
 FIELDS = ("u", "v", "a", "u_old", "v_old")
+#: Scene tables that do not shape the motion: a resumed run may change them.
+NOT_PHYSICS = ("solver", "output", "render")
+
+
+def physics_data(scene) -> dict:
+    """The validated scene without :data:`NOT_PHYSICS`: everything that shapes the motion."""
+    return {k: v for k, v in scene.data.items() if k not in NOT_PHYSICS}
 
 
 def scene_hash(scene) -> str:
-    """A fingerprint of the validated scene: everything that shapes the motion (the output
-    and render settings excluded)."""
-    data = {k: v for k, v in scene.data.items() if k not in ("output", "render")}
-    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+    """A fingerprint of :func:`physics_data`."""
+    return hashlib.sha256(json.dumps(physics_data(scene), sort_keys=True).encode()).hexdigest()
+
+
+def _flat(data, prefix: str = "") -> dict[str, object]:
+    """Nested tables as ``{"a.b.c": value}`` (lists of tables by index: ``body.1.name``)."""
+    if isinstance(data, dict):
+        items = data.items()
+    elif isinstance(data, list) and any(isinstance(v, (dict, list)) for v in data):
+        items = ((str(i), v) for i, v in enumerate(data))
+    else:
+        return {prefix: data}
+    out: dict[str, object] = {}
+    for key, value in items:
+        out |= _flat(value, f"{prefix}.{key}" if prefix else str(key))
+    return out
+
+
+def _changes(old: dict, new: dict) -> list[str]:
+    """``key = new (was old)`` for every key that differs between two nested tables."""
+    a, b = _flat(old), _flat(new)
+    return [f"{key} = {json.dumps(b.get(key))} (was {json.dumps(a.get(key))})"
+            for key in sorted(a.keys() | b.keys()) if a.get(key) != b.get(key)]
 
 
 @dataclass
@@ -52,17 +88,42 @@ class Checkpoint:
     stepper: dict
     shift: float
     contact: dict  # the IPC contact's state across steps (fem_anim.contact.ipc), or {}
+    pressure: np.ndarray | None  # the mixed formulation's p / mu (local dofs of Q), or None
+    solver: dict  # the solver settings it was written with: [solver] and PETSc options
+    couplings: np.ndarray | None = None  # the Hessian's contact couplings (hessian_pattern)
 
 
-def _dof_keys(V, comm: MPI.Comm) -> np.ndarray:
-    """One key per local dof block (owned and ghost): its quantised coordinates as bytes."""
-    x = V.tabulate_dof_coordinates()
-    lo, hi = np.empty(3), np.empty(3)
-    comm.Allreduce(x.min(axis=0) if x.size else np.full(3, np.inf), lo, op=MPI.MIN)
-    comm.Allreduce(x.max(axis=0) if x.size else np.full(3, -np.inf), hi, op=MPI.MAX)
-    extent = max(float(np.max(hi - lo)), 1e-300)
-    q = np.round((x - lo) / extent * 1e9) + 0.0  # + 0.0 turns -0.0 into 0.0
-    return np.ascontiguousarray(q).view(np.dtype((np.void, q.dtype.itemsize * 3))).ravel()
+def dof_identity(V, domain) -> np.ndarray:
+    """One key per local dof block of a Lagrange space of degree <= 2 (owned and ghost).
+
+    A vertex dof is keyed by the vertex's input row i (as i N + i), an edge dof by its
+    vertices' rows i < j (as i N + j), N the number of input points: the same on any
+    partition and at any coordinates. The cell's dofs are its vertices' (reference order,
+    as the geometry's nodes), then one per edge in basix's reference edge order.
+
+    Args:
+        V: The space (P1 or P2, scalar or blocked).
+        domain: The :class:`~fem_anim.mesh.simplex.SimplexMesh` it lives on.
+
+    Returns:
+        int64 keys, one per local dof block.
+    """
+    import basix
+
+    mesh = domain.mesh
+    tdim = mesh.topology.dim
+    nodes = compat.geometry_dofmap(mesh)
+    num_cells = nodes.shape[0]
+    dofs = compat.cell_dofs(V)[:num_cells]
+    vertex = np.asarray(domain.input_index, np.int64)[nodes[:, : tdim + 1]]
+    base = mesh.comm.allreduce(int(domain.input_index.max(initial=-1)) + 1, op=MPI.MAX)
+    edges = basix.topology(compat.basix_cell(("triangle", "tetrahedron")[tdim - 2]))[1]
+    keys = np.full(V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts, -1, np.int64)
+    keys[dofs[:, : tdim + 1]] = vertex * (base + 1)
+    for position, (i, j) in enumerate(edges[: dofs.shape[1] - tdim - 1], start=tdim + 1):
+        lo = np.minimum(vertex[:, i], vertex[:, j])
+        keys[dofs[:, position]] = lo * base + np.maximum(vertex[:, i], vertex[:, j])
+    return keys
 
 
 def _gather_owned(comm: MPI.Comm, local: np.ndarray) -> np.ndarray | None:
@@ -71,24 +132,56 @@ def _gather_owned(comm: MPI.Comm, local: np.ndarray) -> np.ndarray | None:
     return np.concatenate(parts) if comm.rank == 0 else None
 
 
+def _solver_settings(sim) -> dict:
+    """The settings a resumed run may change: ``[solver]`` and the merged PETSc options."""
+    return {"solver": sim.scene.data.get("solver", {}), "petsc": dict(sim.options)}
+
+
+def _grows(sim) -> bool:
+    """Whether the step Hessian's pattern grows with contact (AIJ with ``[contact]``)."""
+    kind = sim.minimiser.A.getType()
+    return sim.problem.ipc is not None and not sim.problem.mixed and kind.endswith("aij") \
+        and "baij" not in kind
+
+
+def restore_pattern(sim, ck: "Checkpoint") -> None:
+    """Give the resumed run's Hessian the pattern the checkpointed one had (collective;
+    :mod:`fem_anim.simulation.hessian_pattern`)."""
+    if _grows(sim):
+        restore_couplings(sim.minimiser.A, sim.problem.V, dof_identity(sim.problem.V,
+                                                                       sim.domain),
+                          ck.couplings)
+
+
 def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: int,
                     rows: list[dict], stepper: dict) -> None:
     """Write ``path`` (rank 0) with the full state after ``frame`` frames (collective)."""
     comm = sim.comm
-    V = sim.problem.V
+    p = sim.problem
+    V = p.V
     n_owned = V.dofmap.index_map.size_local
     bs = V.dofmap.index_map_bs
-    arrays = {"keys": _gather_owned(comm, _dof_keys(V, comm)[:n_owned])}
+    keys = dof_identity(V, sim.domain)
+    arrays = {"keys": _gather_owned(comm, keys[:n_owned])}
     for name in FIELDS:
         values = getattr(state, name)
         if comm.allreduce(values is not None, op=MPI.LAND):
             arrays[name] = _gather_owned(comm, values[: n_owned * bs].reshape(n_owned, bs))
+    if p.mixed:  # Newton's start of the next step keeps the last pressure
+        Q = p.fields.Q
+        q_owned = Q.dofmap.index_map.size_local
+        arrays["p_keys"] = _gather_owned(comm, dof_identity(Q, sim.domain)[:q_owned])
+        arrays["p"] = _gather_owned(comm, p.p.x.array[:q_owned].reshape(q_owned, 1))
+    if _grows(sim):  # the contact pairs met so far, as the Hessian's pattern holds them
+        arrays["couplings"] = extra_couplings(sim.minimiser.A, V, keys)
     if comm.rank != 0:
         return
     shift = sim.minimiser.shift.c if sim.minimiser.shift else 0.0
-    ipc = sim.problem.ipc
-    meta = {"scene": scene_hash(sim.scene), "time": state.time, "step": state.step,
+    ipc = p.ipc
+    meta = {"scene": scene_hash(sim.scene), "physics": physics_data(sim.scene),
+            "solver": _solver_settings(sim), "time": state.time, "step": state.step,
             "frame": frame, "frames_written": frames_written, "stepper": stepper,
+            "every": sim.scene["output"]["every"],
             "shift": shift, "rows": rows, "contact": ipc.state() if ipc is not None else {}}
     buffer = io.BytesIO()
     np.savez(buffer, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
@@ -104,7 +197,11 @@ def _invalid(meta, data: dict, sim) -> str | None:
     its arrays are one row per dof block of this scene's mesh, all finite.
     """
     if not isinstance(meta, dict) or meta.get("scene") != scene_hash(sim.scene):
-        return "it was written for a different scene (the scene's physics changed)"
+        changed = _changes(meta.get("physics", {}), physics_data(sim.scene)) \
+            if isinstance(meta, dict) and isinstance(meta.get("physics"), dict) else []
+        what = f": {'; '.join(changed)}" if changed else ""
+        return f"it was written for a different scene (the scene's physics changed{what}; " \
+               f"only {', '.join(f'[{t}]' for t in NOT_PHYSICS)} may change on resume)"
     cfg = sim.scene["time"]
     h, steps, every = cfg["dt"], cfg["steps"], sim.scene["output"]["every"]
     ints = ("step", "frame", "frames_written")
@@ -113,6 +210,8 @@ def _invalid(meta, data: dict, sim) -> str | None:
             not isinstance(meta.get("rows"), list) or not isinstance(meta.get("stepper"), dict):
         return "its record of the run is incomplete"
     frame, step, written = meta["frame"], meta["step"], meta["frames_written"]
+    if type(meta.get("every")) is int and meta["every"] >= 1:  # output.every may change
+        every = meta["every"]
     if not 1 <= frame < steps:
         return f"frame {frame} is outside 1..{steps - 1} (time.steps = {steps})"
     if not math.isclose(meta["time"], frame * h, rel_tol=1e-9, abs_tol=1e-9 * h):
@@ -131,20 +230,46 @@ def _invalid(meta, data: dict, sim) -> str | None:
             isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0
             for v in contact.values()):
         return f"its contact state {contact!r} is not a table of finite numbers >= 0"
-    keys = data.get("keys")
     bs = sim.problem.V.dofmap.index_map_bs
-    if keys is None or keys.ndim != 1:
-        return "its dof keys are missing"
-    for name in FIELDS:
-        if name in data:
-            a = data[name]
-            if a.shape != (keys.size, bs) or a.dtype.kind != "f":
-                return f"array {name} has shape {a.shape}, not ({keys.size}, {bs})"
-            if not np.all(np.isfinite(a)):
-                return f"array {name} holds non-finite values"
+    shapes = {"keys": (FIELDS, bs)}
+    if sim.problem.mixed:
+        shapes["p_keys"] = (("p",), 1)
+        if "p" not in data:
+            return "its pressure (element.formulation = \"mixed\") is missing"
+    for key_name, (names, width) in shapes.items():
+        keys = data.get(key_name)
+        if keys is None or keys.ndim != 1 or keys.dtype != np.int64:
+            return "its dof keys are missing"
+        for name in names:
+            if name in data:
+                a = data[name]
+                if a.shape != (keys.size, width) or a.dtype.kind != "f":
+                    return f"array {name} has shape {a.shape}, not ({keys.size}, {width})"
+                if not np.all(np.isfinite(a)):
+                    return f"array {name} holds non-finite values"
     if not all(name in data for name in ("u", "v", "a")):
         return "its state arrays u, v, a are incomplete"
+    couplings = data.get("couplings")
+    if couplings is not None and (couplings.ndim != 2 or couplings.shape[1] != 2
+                                  or couplings.dtype != np.int64):
+        return f"its contact couplings have shape {couplings.shape}, not (n, 2) integers"
     return None
+
+
+def _rows_of(stored: np.ndarray, local: np.ndarray, comm: MPI.Comm, path: Path) -> np.ndarray:
+    """The row of ``stored`` holding each of ``local``'s keys (collective).
+
+    Raises:
+        FemAnimError: (on every rank) if a key is missing or stored twice.
+    """
+    order = np.argsort(stored, kind="stable")
+    sorted_keys = stored[order]
+    where = np.minimum(np.searchsorted(sorted_keys, local), max(sorted_keys.size - 1, 0))
+    bad = sorted_keys.size == 0 or bool(np.any(sorted_keys[where] != local)) or \
+        bool(np.any(sorted_keys[1:] == sorted_keys[:-1]))
+    if comm.allreduce(bad, op=MPI.LOR):
+        raise FemAnimError(f"checkpoint {path} does not match this mesh")
+    return order[where]
 
 
 def load_checkpoint(path: Path, sim) -> Checkpoint:
@@ -152,7 +277,8 @@ def load_checkpoint(path: Path, sim) -> Checkpoint:
 
     Raises:
         FemAnimError: if the file is missing or unreadable, was written for another
-            scene or mesh, or holds an impossible record (``_invalid``).
+            scene (naming the physics keys that changed) or mesh, or holds an impossible
+            record (``_invalid``).
     """
     comm = sim.comm
     error, data = None, None
@@ -171,15 +297,38 @@ def load_checkpoint(path: Path, sim) -> Checkpoint:
     if comm.allreduce(error is not None, op=MPI.LOR):  # collective: every rank raises
         message = comm.bcast(error, root=0)
         raise FemAnimError(message or "the checkpoint could not be read on every process")
-    local = _dof_keys(sim.problem.V, comm)
-    order = np.argsort(data["keys"])
-    sorted_keys = data["keys"][order]
-    where = np.minimum(np.searchsorted(sorted_keys, local), sorted_keys.size - 1)
-    if comm.allreduce(bool(np.any(sorted_keys[where] != local)), op=MPI.LOR):
-        raise FemAnimError(f"checkpoint {path} does not match this mesh")
-    rows_of_local = order[where]
-    fields = {name: data[name][rows_of_local].ravel() if name in data else None
-              for name in FIELDS}
+    p = sim.problem
+    rows = _rows_of(data["keys"], dof_identity(p.V, sim.domain), comm, path)
+    fields = {name: data[name][rows].ravel() if name in data else None for name in FIELDS}
+    pressure = None
+    if p.mixed:
+        pressure = data["p"][_rows_of(data["p_keys"], dof_identity(p.fields.Q, sim.domain),
+                                      comm, path)].ravel()
     state = State(**fields, time=meta["time"], step=meta["step"])
     return Checkpoint(state, meta["frame"], meta["frames_written"], meta["rows"],
-                      meta["stepper"], meta["shift"], meta.get("contact", {}))
+                      meta["stepper"], meta["shift"], meta.get("contact", {}), pressure,
+                      meta.get("solver", {}), data.get("couplings"))
+
+
+def describe_resume(ck: Checkpoint, sim, path: Path) -> str:
+    """One line: where the run continues and with which solver settings.
+
+    Args:
+        ck: The loaded checkpoint.
+        sim: The resumed :class:`~fem_anim.simulation.loop.Simulation`.
+        path: The run directory.
+
+    Returns:
+        ``resuming PATH at frame k of N (t = ...) with the same solver settings`` or
+        ``... with changed solver settings: solver.hessian = "shift" (was "exact"), ...``.
+    """
+    steps = sim.scene["time"]["steps"]
+    where = f"resuming {path} at frame {ck.frame} of {steps} (t = {ck.state.time:.6g} s)"
+    if not ck.solver:
+        return f"{where} (its checkpoint does not record the solver settings)"
+    now = _solver_settings(sim)
+    changed = _changes({"solver": ck.solver.get("solver", {})}, {"solver": now["solver"]}) + \
+        _changes({"petsc": ck.solver.get("petsc", {})}, {"petsc": now["petsc"]})
+    if not changed:
+        return f"{where} with the same solver settings"
+    return f"{where} with changed solver settings: {', '.join(changed)}"

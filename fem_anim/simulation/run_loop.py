@@ -12,6 +12,7 @@ naming the file, raised on every rank.
 from __future__ import annotations
 
 import signal
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,10 +21,11 @@ import numpy as np
 
 from fem_anim.errors import FemAnimError, Interrupted, describe_os_error
 from fem_anim.export.usd_stage import export_staged_run, usd_file_name
-from fem_anim.output.files import (RunDirectory, StatsWriter, TrajectoryWriter, write_final,
-                                   write_scene)
+from fem_anim.output.files import RunDirectory, StatsWriter, write_final, write_scene
+from fem_anim.output.trajectory import TrajectoryWriter
 from fem_anim.simulation.adaptive import AdaptiveStepper
-from fem_anim.simulation.checkpoint import load_checkpoint, save_checkpoint
+from fem_anim.simulation.checkpoint import (Checkpoint, describe_resume, load_checkpoint,
+                                            restore_pattern, save_checkpoint)
 from fem_anim.simulation.integrators import State
 from fem_anim.simulation.interrupt import Interrupts
 from fem_anim.simulation.progress import Progress
@@ -111,6 +113,28 @@ def _io(sim, path: Path, write, *args):
     return result
 
 
+def _restore(sim, stepper: AdaptiveStepper, ck: Checkpoint) -> None:
+    """Put a checkpoint's state across steps back: the adaptive step, the Hessian shift,
+    the contact's barrier stiffness and the Hessian's pattern, the mixed formulation's
+    pressure, the velocity the energies report (collective)."""
+    stepper.dt, stepper.last_dt = ck.stepper["dt"], ck.stepper["last_dt"]
+    if sim.minimiser.shift:
+        sim.minimiser.shift.c = ck.shift
+    p = sim.problem
+    if p.ipc is not None:
+        p.ipc.restore(ck.contact)
+    if ck.pressure is not None:  # the unknown (u, p) as the last step left it
+        p.fields.w.x.array[p.fields.p_dofs] = ck.pressure
+        p.fields.set_displacement(ck.state.u)
+        p.p.x.array[:] = ck.pressure
+    p.u.x.array[:] = ck.state.u
+    p.v.x.array[:] = ck.state.v
+    try:
+        restore_pattern(sim, ck)
+    except KeyError as err:
+        raise FemAnimError(f"the checkpoint does not match this mesh: {err.args[0]}") from None
+
+
 def _loop(sim, h, steps, every, run_dir, quiet, resume, interrupts) -> RunResult:
     stepper = AdaptiveStepper(sim, h, sim.scene["time"])
     checkpoint_every = sim.scene["output"]["checkpoint_every"] or max(1, steps // 10)
@@ -119,11 +143,7 @@ def _loop(sim, h, steps, every, run_dir, quiet, resume, interrupts) -> RunResult
         ck = load_checkpoint(run_dir.file("checkpoint.npz"), sim)
         state, first, rows, kept = ck.state, ck.frame + 1, ck.rows, ck.frames_written
         resumed_rows = len(rows)
-        stepper.dt, stepper.last_dt = ck.stepper["dt"], ck.stepper["last_dt"]
-        if sim.minimiser.shift:
-            sim.minimiser.shift.c = ck.shift
-        if sim.problem.ipc is not None:
-            sim.problem.ipc.restore(ck.contact)
+        _restore(sim, stepper, ck)
     else:
         state = sim.initial_state()
     stats_file = trajectory = None
@@ -140,6 +160,10 @@ def _loop(sim, h, steps, every, run_dir, quiet, resume, interrupts) -> RunResult
             len(trajectory.times) if trajectory.rank0 else 0, rows,
             {"dt": stepper.dt, "last_dt": stepper.last_dt})
 
+    if resume and sim.comm.rank == 0:
+        line = describe_resume(ck, sim, run_dir.path)
+        if not quiet or "with changed solver settings" in line:
+            print(f"fem-anim: {line}", file=sys.stderr)
     progress = Progress(steps, disable=quiet or sim.comm.rank != 0)
     progress.update(0, advance=first - 1)
     try:
@@ -167,10 +191,9 @@ def _loop(sim, h, steps, every, run_dir, quiet, resume, interrupts) -> RunResult
         progress.close()
         if stats_file:
             stats_file.close()
-        if trajectory:
-            trajectory.close()
     final, energy_density = sim.frame_fields(state)
     if run_dir is not None:
+        _io(sim, trajectory.h5_path, trajectory.finish)
         _io(sim, run_dir.file("final.vtu"), write_final, run_dir.file("final.vtu"),
             sim.domain, final, energy_density)
         _io(sim, run_dir.file("scene.json"), write_scene, run_dir.file("scene.json"),

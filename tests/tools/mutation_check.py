@@ -613,6 +613,43 @@ MUTATIONS: list[Mutation] = [
              "            du = (self.weight * r * self.m).reshape(-1)",
              ("tests/test_adjoint.py::test_gradient_equals_central_differences",),
              "the centre of mass's derivative not divided by the total mass"),
+    # -- resume: checkpoints and the trajectory a kill leaves ----------------------------------
+    Mutation("checkpoint-drops-bdf2-history", "fem_anim/simulation/checkpoint.py",
+             'FIELDS = ("u", "v", "a", "u_old", "v_old")', 'FIELDS = ("u", "v", "a")',
+             ("tests/test_checkpoint.py::test_resume_equals_uninterrupted_for_every_integrator"
+              "[bdf2]",),
+             "BDF2's previous step not saved: the resumed run restarts it with implicit Euler"),
+    Mutation("checkpoint-drops-kappa", "fem_anim/simulation/run_loop.py",
+             "        p.ipc.restore(ck.contact)\n", "        pass\n",
+             ("tests/test_checkpoint.py::test_contact_resume_inside_an_impact_is_bit_for_bit",),
+             "IPC's adaptive barrier stiffness restarts from its floor 0 on resume"),
+    Mutation("checkpoint-drops-contact-pattern", "fem_anim/simulation/run_loop.py",
+             "        restore_pattern(sim, ck)\n", "        pass\n",
+             ("tests/test_checkpoint.py::test_contact_resume_inside_an_impact_is_bit_for_bit",),
+             "the Hessian's pattern grown by earlier contact pairs not restored: the direct "
+             "solver rounds differently (the 4.4e-9 drift)"),
+    Mutation("checkpoint-drops-pressure", "fem_anim/simulation/run_loop.py",
+             "        p.fields.w.x.array[p.fields.p_dofs] = ck.pressure\n", "",
+             ("tests/test_checkpoint.py::test_mixed_resume_keeps_the_pressure",),
+             "the mixed formulation's Newton starts the resumed step from pressure 0"),
+    Mutation("checkpoint-keys-by-position", "fem_anim/simulation/checkpoint.py",
+             "    vertex = np.asarray(domain.input_index, np.int64)[nodes[:, : tdim + 1]]",
+             "    x = mesh.geometry.x[:, 0]\n"
+             "    step = (x.max() - x.min()) * 1e-9 if x.size else 1.0\n"
+             "    vertex = np.round((x - x.min()) / step).astype(np.int64)[nodes[:, : tdim + 1]]",
+             ("tests/test_checkpoint.py::test_resume_at_any_scene_extent",),
+             "dofs keyed by their position quantised to 1e-9 of the extent: keys collide when a "
+             "body is 1e8 m away"),
+    Mutation("checkpoint-solver-is-physics", "fem_anim/simulation/checkpoint.py",
+             'NOT_PHYSICS = ("solver", "output", "render")', 'NOT_PHYSICS = ("output", "render")',
+             ("tests/test_checkpoint.py::test_solver_change_on_resume_is_accepted_and_said",),
+             "a solver setting changed on resume refused as a change of the physics"),
+    Mutation("trajectory-ignores-merged-frames", "fem_anim/output/trajectory.py",
+             "                    if not self.frame_file(k).is_file() and k < merged.size \\\n",
+             "                    if False and k < merged.size \\\n",
+             ("tests/test_kill_resume.py::test_kill_inside_writes_then_resume[after-merge]",),
+             "a kill after the frames were merged into trajectory.h5: the resume finds no frame "
+             "files and refuses the run"),
 ]
 
 def copy_tree(dest: Path) -> None:
