@@ -554,7 +554,7 @@ MUTATIONS: list[Mutation] = [
              "psi[surface.owner].astype", "psi[:surface.owner.size].astype",
              ("tests/test_export.py::test_energy_density_primvar_is_the_cells_behind_the_faces",),
              "the face's energy density taken from the first cells, not the cell behind it"),
-    Mutation("xdmf-body-missing", "fem_anim/output/files.py",
+    Mutation("xdmf-body-missing", "fem_anim/output/trajectory.py",
              "            f'<Attribute Name=\"body\" AttributeType=",
              "            f'<Attribute Name=\"bodies\" AttributeType=",
              ("tests/test_export.py::test_body_ids_in_xdmf_vtu_and_usd",),
