@@ -83,8 +83,8 @@ def _shear_energies(tmp_path, formulation, beta, nu=0.45):
 def test_stiffness_damping_matches_the_displacement_formulation(tmp_path):
     """beta = 0.01 s at nu = 0.45: the energy the damping takes (damped against undamped
     run) agrees with the displacement formulation's within 10 % (measured: 12.7 % and
-    13.6 % of the start energy; the deviatoric part carries most of it in a shear motion); without the term it
-    would take nothing."""
+    13.6 % of the start energy; the deviatoric part carries most of it in a shear
+    motion); without the term it would take nothing."""
     losses = {}
     for formulation in ("mixed", "displacement"):
         start, free = _shear_energies(tmp_path, formulation, 0.0)

@@ -617,7 +617,8 @@ MUTATIONS: list[Mutation] = [
     Mutation("mixed-damping-of-dead-u", "fem_anim/problem/energy_terms.py",
              "            u_obj = self.fields.u if self.mixed else self.u\n",
              "            u_obj = self.u\n",
-             ("tests/test_mixed_with_contact.py::test_mass_damping_decays_momentum_by_the_closed_form",),
+             ("tests/test_mixed_with_contact.py::test_mass_damping_decays_momentum_by_the_"
+              "closed_form",),
              "the mixed dissipation taken of the collapsed u (a coefficient), not of w's u"),
     Mutation("mixed-damping-no-stiffness-part", "fem_anim/problem/energy_terms.py",
              "float(cfg[\"beta\"]), self.rho",
@@ -628,12 +629,14 @@ MUTATIONS: list[Mutation] = [
     Mutation("mixed-obstacle-barrier-dropped", "fem_anim/problem/energy_terms.py",
              "                potential += self._of_unknown(self.contact.energy)\n",
              "                pass\n",
-             ("tests/test_mixed_with_contact.py::test_incompressible_body_lands_on_a_plane",),
+             ("tests/test_mixed_with_contact.py::test_incompressible_body_lands_on_a_"
+              "plane",),
              "the mixed step objective without the obstacle barrier"),
     Mutation("mixed-step-bound-on-w", "fem_anim/solver/step_bounds.py",
              "        y = problem.fields.displacement_part(y)\n",
              "        pass\n",
-             ("tests/test_mixed_with_contact.py::test_incompressible_body_lands_on_a_plane",),
+             ("tests/test_mixed_with_contact.py::test_incompressible_body_lands_on_a_"
+              "plane",),
              "the obstacle step bound reads the mixed direction (u, p) as a displacement"),
     Mutation("mixed-default-preset", "fem_anim/scene/modes.py",
              "        solver.setdefault(\"preset\", MIXED_DEFAULT_PRESET)\n",
