@@ -365,7 +365,7 @@ CORPUS = [
                      "stabilisation"),
         '[element]\nformulation = "mixed"\n[solver]\npreset = "ldlt"\n'),
     Bad("mixed-cholesky", ("solver.preset = 'cholesky' cannot solve the saddle-point Hessian",
-                           "ldlt, lu, schur"), MIXED),
+                           "ldlt, lu, schur"), f'{MIXED}[solver]\npreset = "cholesky"\n'),
     Bad("mixed-decrement", ("solver.stopping = 'decrement' is refused with element.formulation",
                             "saddle point"),
         f'{MIXED}[solver]\npreset = "ldlt"\nstopping = "decrement"\n'),

@@ -264,13 +264,22 @@ def test_mixed_rows_of_the_locking_table_do_not_lock():
         assert abs(r["reference"] / r["beam_theory"] - 1.0) < 0.05, r
 
 
-def test_the_default_scene_mixed_names_its_damping():
-    """The default scene's Rayleigh damping (beta K_0 needs lambda, infinite at nu = 0.5) is
-    refused with the way out; with beta = 0 the same scene loads."""
-    from fem_anim.errors import SceneError
-    from fem_anim.scene import load_scene
+def test_the_default_scene_mixed_keeps_its_damping_and_gets_a_saddle_point_preset():
+    """The default scene made mixed keeps its Rayleigh damping and, naming no preset, gets
+    ldlt (the saddle point is indefinite: cholesky cannot factorise it); a named preset that
+    cannot solve it is one error naming the ones that can."""
+    from fem_anim.errors import FemAnimError
+    from fem_anim.scene import MIXED_DEFAULT_PRESET, load_scene
+    from fem_anim.simulation.loop import solver_options
 
     mixed = ["element.degree=2", 'element.formulation="mixed"']
-    with pytest.raises(SceneError, match=r"set damping.alpha = damping.beta = 0"):
-        load_scene(None, mixed)
-    assert not load_scene(None, [*mixed, "damping.beta=0"]).damped
+    scene = load_scene(None, mixed)
+    assert scene.damped and scene["solver"]["preset"] == MIXED_DEFAULT_PRESET == "ldlt"
+    assert load_scene(None, [*mixed, "solver.mode=\"preview\""])["solver"]["preset"] == "ldlt"
+    assert load_scene(None, [*mixed, 'solver.preset="lu"'])["solver"]["preset"] == "lu"
+    assert load_scene(None, [])["solver"]["preset"] == "cholesky"
+    named = load_scene(None, [*mixed, 'solver.preset="cholesky"'])
+    with pytest.raises(FemAnimError, match=r"cholesky.*use one of ldlt, lu, schur"):
+        solver_options(named)
+    with pytest.raises(FemAnimError, match=r"--solver = 'cg-icc'.*use one of ldlt"):
+        solver_options(scene, preset="cg-icc")

@@ -25,7 +25,7 @@ from mpi4py import MPI
 from fem_anim import compat
 from fem_anim.simulation.energy_report import energy_report, initial_energies
 from fem_anim.errors import ConvergenceError
-from fem_anim.mesh.build import build_mesh
+from fem_anim.mesh.bodies import build_scene_mesh
 from fem_anim.simulation.adaptive import AdaptiveStepper
 from fem_anim.simulation.loop import Simulation
 
@@ -121,7 +121,7 @@ def measure_configuration(scene, comm: MPI.Comm, points: np.ndarray, stride: int
     m = Measurement()
     comm.barrier()
     t0 = time.perf_counter()
-    domain = domain if domain is not None else build_mesh(comm, scene)
+    domain = domain if domain is not None else build_scene_mesh(comm, scene)
     m.mesh_s = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     t0 = time.perf_counter()
     sim = Simulation(scene, comm, {}, domain=domain)

@@ -107,8 +107,9 @@ def expand_study(path: str | None, base_overrides: list[str], sweeps: list[str],
     """Validate the sweeps and expand them into configurations plus the reference.
 
     The reference is the base scene with the smallest swept time step divided by 4,
-    the smallest swept element size, P2 elements and a tight Newton tolerance
-    (``snes_rtol = 1e-10``), then ``reference_overrides``.
+    the smallest swept element size, P2 elements (P1 for a scene that refuses P2: with
+    ``[contact]``) and a tight Newton tolerance (``snes_rtol = 1e-10``), then
+    ``reference_overrides``.
 
     Raises:
         SceneError: naming the bad sweep key or value (each value is validated alone on
@@ -146,6 +147,8 @@ def expand_study(path: str | None, base_overrides: list[str], sweeps: list[str],
                                              duration, interval))
     ref_overrides = [f"time.dt={min(dts) / 4.0!r}", "element.degree=2",
                      "solver.petsc.snes_rtol=1e-10"]
+    if _degree_one_only(base):  # the scene refuses P2: a finer step and mesh only
+        ref_overrides.remove("element.degree=2")
     for key, overrides in parsed:
         if key == "mesh.element_size":
             ref_overrides.append(f"mesh.element_size="
@@ -160,6 +163,12 @@ def expand_study(path: str | None, base_overrides: list[str], sweeps: list[str],
     if reference.skipped:
         raise SceneError(f"--reference: {reference.skipped}")
     return Study(base, configurations, reference, duration, interval, frames)
+
+
+def _degree_one_only(scene: Scene) -> bool:
+    """Whether the scene's cross-key rules refuse P2 elements (``[contact]`` between
+    surfaces takes P1 only: :mod:`fem_anim.scene.consistency`)."""
+    return "contact" in scene.data
 
 
 def _configuration(path, base_overrides, overrides, values, label, duration,

@@ -134,12 +134,12 @@ def _study(args) -> int:
         raise FemAnimError(error)
 
     from fem_anim.console import quiet_jit_logging
-    from fem_anim.mesh.build import build_mesh
+    from fem_anim.mesh.bodies import build_scene_mesh
     from fem_anim.bench.measure import measure_configuration, median_run
 
     quiet_jit_logging()
     ref_scene = study.reference.scene
-    domain = build_mesh(comm, ref_scene)
+    domain = build_scene_mesh(comm, ref_scene)
     points = comm.bcast(domain.points if comm.rank == 0 else None, root=0)
     stride = round(study.interval / ref_scene["time"]["dt"])
     _say(comm, args.quiet, f"bench: reference ({' '.join(study.reference.overrides)}), "

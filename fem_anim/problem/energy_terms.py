@@ -107,17 +107,19 @@ class EnergyTerms:
             potential = ufl.derivative(at_prev, self.u_prev, self.u)
             if self.contact is not None:  # the barrier stays implicit: it guards d > 0
                 potential += self.contact.energy
-        if self.mixed:  # the same potential, of the mixed unknown (no contact: refused)
+        if self.mixed:  # the same potential, of the mixed unknown
             potential = self._mixed_energy(u_obj, self.fields.p)
             if gravity_u is not None:
                 potential += gravity_forms.gravity_potential(u_obj, self.rho, self.g,
                                                              self.dx_load)
+            if self.contact is not None:  # the barrier of the displacement block
+                potential += self._of_unknown(self.contact.energy)
         contact_terms = None
         if self.contact is not None:
             contact_terms = self.contact.energy if self.contact.friction is None else \
                 self.contact.energy + self.contact.friction
             if self.contact.friction is not None:
-                potential += self.contact.friction
+                potential += self._of_unknown(self.contact.friction)
                 varying += self.contact.friction
         terms = StepTerms(elastic_u, gravity_u, potential_u, potential, varying, contact_terms)
         terms.convex = inertia_forms.inertia(u_obj, self.u_pred, self.rho, self.dx_mass)
@@ -139,8 +141,9 @@ class EnergyTerms:
             else (du, dv)
         terms.du, terms.dv, terms.du_V, terms.dv_V = du, dv, du_V, dv_V
         ufl_forms = {}
-        if scene.damped:
-            terms.convex += self._dissipation(self.u, self.u_anchor, self.damping_coefficient)
+        if scene.damped:  # of the objective's displacement (the mixed w's first field)
+            u_obj = self.fields.u if self.mixed else self.u
+            terms.convex += self._dissipation(u_obj, self.u_anchor, self.damping_coefficient)
             zero = ufl.as_vector([0.0] * d)
             ufl_forms["damping_force"] = ufl.derivative(
                 self._dissipation(self.v, zero, 1.0), self.v, dv_V)
@@ -156,8 +159,10 @@ class EnergyTerms:
         self.tangent_data = None
         self.hessian_mode = scene["solver"]["hessian"] if not self.scheme.explicit \
             else "exact"
-        if self.contact is not None:
-            terms.correction = self.contact.curvature_correction(du, dv)
+        if self.contact is not None:  # on the displacement block of a mixed unknown
+            du_u, dv_u = (ufl.split(du)[0], ufl.split(dv)[0]) if self.mixed else (du, dv)
+            correction = self.contact.curvature_correction(du_u, dv_u)
+            terms.correction = None if correction is None else self._of_unknown(correction)
         if terms.correction is not None:
             jacobian += self.weight * terms.correction  # sphere barriers: PSD-projected
         jacobian = self._choose_hessian_forms(terms, jacobian, ufl_forms)
@@ -296,6 +301,11 @@ class EnergyTerms:
         """int psi(F(u)) dX, one integral per material model in use."""
         return sum(self._psi(u, material=m) * dx for m, dx in self.elastic_terms)
 
+    def _of_unknown(self, form):
+        """A form of the displacement ``u`` as a form of the objective's unknown: itself, or,
+        for the mixed formulation, with ``u`` replaced by the first field of w."""
+        return ufl.replace(form, {self.u: self.fields.u}) if self.mixed else form
+
     def _mixed_energy(self, u, p_scaled, q=1.0):
         """int q W(F(u), mu p~) dX, W the perturbed Lagrangian
         (:func:`fem_anim.forms.incompressible.lagrangian`)."""
@@ -305,8 +315,19 @@ class EnergyTerms:
 
     def _dissipation(self, u, anchor, coefficient):
         """The Rayleigh dissipation potential c/2 (u - u_d)^T C (u - u_d)
-        (:func:`fem_anim.forms.damping.dissipation_potential`)."""
+        (:func:`fem_anim.forms.damping.dissipation_potential`).
+
+        C = alpha M + beta K_0, K_0 the stiffness at rest: 1/2 d^T K_0 d is the
+        linear-elastic energy int mu |eps|^2 + lmbda/2 tr(eps)^2 = int mu |dev eps|^2 +
+        K/2 tr(eps)^2 (K = lmbda + 2 mu / d the bulk modulus). The mixed formulation damps
+        its displacement block with the deviatoric part only, the linear-elastic energy of
+        the Lame pair (mu, -2 mu / d): its volumetric part K/2 tr(eps)^2 is infinite at
+        nu = 1/2, where the constraint g(J) = 0 keeps the motion isochoric (tr eps(v) = 0)
+        and the term does no work; for nu < 1/2 it would put the volumetric stiffness, which
+        the pressure carries, back into the displacement block.
+        """
         cfg = self.scene["damping"]
+        lmbda = -2.0 / self.d * self.mu if self.mixed else self.lmbda
         return damping_forms.dissipation_potential(
             u, anchor, coefficient, float(cfg["alpha"]), float(cfg["beta"]), self.rho, self.mu,
-            self.lmbda, self.dx_mass, self.dx_elastic)
+            lmbda, self.dx_mass, self.dx_elastic)

@@ -55,11 +55,23 @@ class MixedFields:
         self.w = fem.Function(self.W, name="displacement_pressure")
         self.u, self.p = ufl.split(self.w)
         self.block = self.V.dofmap.index_map_bs
+        self._block = fem.Function(self.V)  # displacement_part's result
 
     def scatter(self, u: fem.Function, p: fem.Function) -> None:
         """Copy the two fields of :attr:`w` (owned and ghost values) into ``u`` and ``p``."""
         u.x.array[:] = self.w.x.array[self.u_dofs]
         p.x.array[:] = self.w.x.array[self.p_dofs]
+
+    def displacement_part(self, y: PETSc.Vec) -> PETSc.Vec:
+        """The displacement block of a vector ``y`` of the mixed space, as a vector of ``V``
+        (owned values copied, ghosts updated from their owners, so the ghost entries of
+        ``y`` need not be current; collective). The result is overwritten by the next call.
+        """
+        with y.localForm() as local:
+            self._block.x.array[:] = local.array_r[self.u_dofs]
+        vec = compat.petsc_vec(self._block)
+        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        return vec
 
     def set_displacement(self, u: np.ndarray) -> None:
         """Put displacement values (local dofs of ``V``) into :attr:`w`; the pressure stays."""

@@ -20,6 +20,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "REGION_MATERIAL_KEYS": "consistency",
     "check_consistency": "consistency",
     "check_render": "consistency",
+    "MIXED_DEFAULT_PRESET": "modes",
     "SOLVER_MODES": "modes",
     "apply_solver_mode": "modes",
     "DEFAULTS": "schema",

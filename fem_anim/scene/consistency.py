@@ -64,15 +64,8 @@ def _check_formulation(data: dict[str, Any]) -> None:
     if not mat["poisson_ratio"] > 0.0:
         raise SceneError(f"material.poisson_ratio must be in (0, 0.5] {where}, got "
                          f"{mat['poisson_ratio']}")
-    refused = {"region": bool(data.get("region")), "obstacle": bool(data["obstacle"]),
-               "damping": bool(data.get("damping")) and any(
-                   data["damping"][k] > 0 for k in ("alpha", "beta"))}
-    for key, present in refused.items():
-        if present:
-            how = {"damping": " (not built for the u-p saddle point; beta K_0 would need "
-                   "lambda, infinite at nu = 0.5): set damping.alpha = damping.beta = 0 (the "
-                   "default scene has beta = 1e-4)"}.get(key, "")
-            raise SceneError(f"[{key}] is not supported {where}{how}")
+    if data.get("region"):
+        raise SceneError(f"[region] is not supported {where}")
     if data["time"]["integrator"] == "symplectic_euler":
         raise SceneError(f"time.integrator = \"symplectic_euler\" is refused {where}: the "
                          "constraint must be implicit")

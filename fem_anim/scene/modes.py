@@ -16,7 +16,9 @@ explicitly still wins, as does ``--solver`` on the command line.
   accepts without meeting the residual test is marked in ``stats.csv`` (reason 7,
   ``residual_ratio``), so the inexactness is visible.
 
-A mixed (u, p) scene keeps its saddle-point preset and exact Hessian; a scene whose regions
+A mixed (u, p) scene that names no ``preset`` gets :data:`MIXED_DEFAULT_PRESET` (``ldlt``,
+MUMPS LDL^T with pivoting: the saddle point is symmetric indefinite, which the default
+``cholesky`` cannot factorise) in either mode, and keeps the exact Hessian; a scene whose regions
 use several material models, or that names another ``method`` or a ``hessian_update``,
 keeps the exact Hessian in either mode (``auto`` filters one model's tangent, and a kept
 Hessian is never filtered). The measurements behind the preview's settings are in the
@@ -29,7 +31,11 @@ from typing import Any
 
 from fem_anim.petsc_options import flatten_options
 
-__all__ = ["SOLVER_MODES", "apply_solver_mode"]
+__all__ = ["MIXED_DEFAULT_PRESET", "SOLVER_MODES", "apply_solver_mode"]
+
+#: The preset a mixed (u, p) scene gets when it names none: a pivoting symmetric indefinite
+#: factorisation, exact for the saddle point (``fem-anim solvers``).
+MIXED_DEFAULT_PRESET = "ldlt"
 
 #: ``solver.mode`` -> the ``[solver]`` keys it fills when the scene leaves them out.
 SOLVER_MODES: dict[str, dict[str, Any]] = {
@@ -57,9 +63,11 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
     keep_exact = mixed or solver.get("method", "newton") != "newton" or \
         solver.get("hessian_update", "every_iteration") != "every_iteration" or \
         _several_models(raw)
+    if mixed:  # the saddle point needs ldlt, lu or schur (fem_anim.problem.mixed_space)
+        solver.setdefault("preset", MIXED_DEFAULT_PRESET)
     for key, value in SOLVER_MODES[mode].items():
         if key == "preset" and mixed:
-            continue  # the saddle point needs ldlt, lu or schur (fem_anim.problem.mixed_space)
+            continue
         if key == "hessian" and keep_exact:
             continue
         if key == "petsc":

@@ -44,6 +44,8 @@ def step_limit(problem, x: PETSc.Vec, y: PETSc.Vec) -> float:
         return 1.0
     problem.set_state(x)
     alpha = 1.0
+    if getattr(problem, "mixed", False):  # the displacement block of y = (y_u, y_p)
+        y = problem.fields.displacement_part(y)
     if contact is not None:
         alpha = contact.step_bound(y)
     if ipc is not None:

@@ -650,6 +650,49 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_kill_resume.py::test_kill_inside_writes_then_resume[after-merge]",),
              "a kill after the frames were merged into trajectory.h5: the resume finds no frame "
              "files and refuses the run"),
+    # -- mixed (u, p) with damping, obstacles and a default preset; the trade study on bodies
+    Mutation("mixed-damping-of-dead-u", "fem_anim/problem/energy_terms.py",
+             "            u_obj = self.fields.u if self.mixed else self.u\n",
+             "            u_obj = self.u\n",
+             ("tests/test_mixed_with_contact.py::test_mass_damping_decays_momentum_by_the_"
+              "closed_form",),
+             "the mixed dissipation taken of the collapsed u (a coefficient), not of w's u"),
+    Mutation("mixed-damping-no-stiffness-part", "fem_anim/problem/energy_terms.py",
+             "float(cfg[\"beta\"]), self.rho",
+             "float(cfg[\"beta\"]) * (not self.mixed), self.rho",
+             ("tests/test_mixed_with_contact.py::test_stiffness_damping_matches_the_"
+              "displacement_formulation",),
+             "beta K_0 left out of the mixed formulation's dissipation potential"),
+    Mutation("mixed-obstacle-barrier-dropped", "fem_anim/problem/energy_terms.py",
+             "                potential += self._of_unknown(self.contact.energy)\n",
+             "                pass\n",
+             ("tests/test_mixed_with_contact.py::test_incompressible_body_lands_on_a_"
+              "plane",),
+             "the mixed step objective without the obstacle barrier"),
+    Mutation("mixed-step-bound-on-w", "fem_anim/solver/step_bounds.py",
+             "        y = problem.fields.displacement_part(y)\n",
+             "        pass\n",
+             ("tests/test_mixed_with_contact.py::test_incompressible_body_lands_on_a_"
+              "plane",),
+             "the obstacle step bound reads the mixed direction (u, p) as a displacement"),
+    Mutation("mixed-default-preset", "fem_anim/scene/modes.py",
+             "        solver.setdefault(\"preset\", MIXED_DEFAULT_PRESET)\n",
+             "        pass\n",
+             ("tests/test_mixed.py::test_the_default_scene_mixed_keeps_its_damping_and_gets_a_"
+              "saddle_point_preset",),
+             "a mixed scene naming no preset keeps cholesky, which cannot solve it"),
+    Mutation("trade-mesh-of-one-body", "fem_anim/bench/trade.py",
+             "    domain = build_scene_mesh(comm, ref_scene)",
+             "    from fem_anim.mesh.build import build_mesh\n"
+             "    domain = build_mesh(comm, ref_scene)",
+             ("tests/test_bench_trade_bodies.py::test_trade_study_runs_on_the_pile",),
+             "the trade study builds the top-level [mesh], not the bodies' union"),
+    Mutation("trade-p2-reference-with-contact", "fem_anim/bench/sweep.py",
+             "    return \"contact\" in scene.data\n",
+             "    return False\n",
+             ("tests/test_bench_trade_bodies.py::test_reference_of_a_contact_scene_is_one_the_"
+              "scene_allows",),
+             "the reference of a contact scene asks for P2, which [contact] refuses"),
 ]
 
 def copy_tree(dest: Path) -> None:
