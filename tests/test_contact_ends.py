@@ -130,12 +130,12 @@ def _run_in_time(tmp_path: Path, text: str, seconds: float) -> Simulation:
     start = time.perf_counter()
     result = sim.run(tmp_path / "out", quiet=True)
     wall = time.perf_counter() - start
-    ccd = sim.problem.ipc.timers["ccd_s"]
-    print(f"{len(result.rows)} steps in {wall:.2f} s, CCD {ccd:.3f} s")
+    ipc = sum(row["contact_s"] for row in result.rows)  # ipctk's time, failed tries included
+    print(f"{len(result.rows)} steps in {wall:.2f} s, ipctk {ipc:.3f} s")
     assert len(result.rows) >= sim.scene["time"]["steps"]
     assert result.rows[-1]["time"] == pytest.approx(
         sim.scene["time"]["dt"] * sim.scene["time"]["steps"])
-    assert ccd < 0.25 * seconds, "the CCD's work is not bounded"
+    assert ipc < 0.5 * seconds, "the contact library's work is not bounded"
     assert wall < seconds
     return sim
 
