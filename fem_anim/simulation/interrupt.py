@@ -92,12 +92,15 @@ class Interrupts(_Handlers):
         """Start the watcher process on the reading end of a new wakeup pipe."""
         read, write = os.pipe()
         os.set_blocking(write, False)
-        try:
+        try:  # named "signal-watch", its source on stdin: it is no fem_anim process
             self._watcher = subprocess.Popen(
-                [sys.executable, "-I", "-S", signal_watch.__file__, str(read),
-                 str(os.getpid()), str(signal_watch.GRACE_S),
-                 ",".join(str(int(s)) for s in SIGNALS)],
-                pass_fds=(read,), stdin=subprocess.DEVNULL, start_new_session=True)
+                ["signal-watch", "-I", "-S", "-", str(read), str(os.getpid()),
+                 str(signal_watch.GRACE_S), ",".join(str(int(s)) for s in SIGNALS)],
+                executable=sys.executable, pass_fds=(read,), stdin=subprocess.PIPE,
+                start_new_session=True)
+            with open(signal_watch.__file__, "rb") as source:
+                self._watcher.stdin.write(source.read())
+            self._watcher.stdin.close()
         except OSError:  # no process to spare: signals still stop the run between calls
             os.close(write)
             return

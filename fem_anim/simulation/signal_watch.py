@@ -17,7 +17,9 @@ directory's lock is a ``flock``, released by the kernel. The watcher ends when t
 closes its end of the pipe (the run ended, whatever the way), and ignores SIGINT, SIGTERM
 and SIGHUP itself (a Ctrl-C at the terminal reaches every process of the foreground group).
 
-Usage: ``python signal_watch.py FD PID GRACE_S SIGNUMS`` (``SIGNUMS`` comma-separated).
+Usage: ``python signal_watch.py FD PID GRACE_S SIGNUMS`` (``SIGNUMS`` comma-separated);
+:class:`~fem_anim.simulation.interrupt.Interrupts` runs it as ``signal-watch -I -S - ...``
+with this file on stdin, so that the process list shows it apart from the run's own.
 """
 
 from __future__ import annotations
