@@ -163,7 +163,7 @@ def test_throw_of_60_bodies_finishes(tmp_path):
     ("contact.stiffness", "1e150", "contact.stiffness must be at most"),
     ("contact.stiffness", "1e-150", "contact.stiffness must be at least"),
     ("contact.dhat", "1e-150", "contact.dhat must be at least"),
-    ("contact.dhat", "0.2", "contact.dhat must be smaller than the smallest element size"),
+    ("contact.dhat", "0.2", "contact.dhat must be smaller than every body"),
     ("contact.friction", "1e100", "contact.friction must be at most"),
     ("obstacle", '[{type = "plane", normal = [0, 0, 1], point = [0, 0, -1], '
      'stiffness = 1e150}]', "obstacle[0].stiffness must be at most"),
@@ -193,6 +193,14 @@ def load_scene_text(text: str, overrides: list[str]):
         path = Path(folder) / "scene.toml"
         path.write_text(text)
         return load_scene(path, overrides)
+
+
+def test_dhat_above_the_element_size_is_refused():
+    fine = FACE_TO_FACE.replace("element_size = 0.1", "element_size = 0.05")
+    load_scene_text(fine, ["contact.dhat=0.04"])
+    with pytest.raises(SceneError, match=r"contact.dhat must be smaller than the smallest "
+                                         r"element size \(0.05 m\), got 0.07"):
+        load_scene_text(fine, ["contact.dhat=0.07"])
 
 
 def test_handles_driven_into_each_other_are_refused():
@@ -269,3 +277,22 @@ def test_second_signal_stops_a_run_inside_a_library_call(tmp_path, signum):
     assert len(lines) == 1 and lines[0].startswith("fem-anim: error: interrupted by "
                                                    f"{signum.name} (twice)"), stderr
     assert (out / ".partial").is_dir()  # kept: nothing deleted
+
+
+@pytest.mark.parametrize("error", [MemoryError(), RuntimeError("PETSc error code 55\ndetail")])
+def test_library_error_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch, error):
+    """An exception of a compiled library inside the run is one line, not a traceback."""
+    import ipctk
+
+    def fail(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(ipctk, "compute_collision_free_stepsize", fail)
+    path = tmp_path / "scene.toml"
+    path.write_text(FACE_TO_FACE)
+    code = main(["run", str(path), "-o", str(tmp_path / "out"), "--set",
+                 "output.render=false"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("fem-anim: error:"), err
+    assert ("out of memory" in err[0]) == isinstance(error, MemoryError), err[0]
+    assert "PETSc error code 55" in err[0] or isinstance(error, MemoryError)

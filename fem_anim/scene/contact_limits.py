@@ -98,14 +98,14 @@ def _element_size(mesh: dict[str, Any]) -> float | None:
 
 
 def _bodies(data: dict[str, Any]) -> list[dict[str, Any]]:
-    """Each body as (name, mesh, box, pins, youngs_modulus), the top-level one if no [[body]]."""
+    """Each body's name, mesh, bounding box, pins and Young's moduli (the top-level body if
+    there is no ``[[body]]``)."""
     if data["body"]:
-        items = [(f"body[{k}] ({b['name']})", b, b["pin"], f"body[{k}].")
-                 for k, b in enumerate(data["body"])]
+        items = [(b["name"], b, b["pin"], f"body[{k}].") for k, b in enumerate(data["body"])]
     else:
-        items = [("the body", {"mesh": data["mesh"], "material": data["material"],
-                               "offset": None, "rotation": None}, data["pin"], "")]
-    return [{"name": name, "mesh": b["mesh"], "pins": pins, "prefix": prefix,
+        items = [("body", {"mesh": data["mesh"], "material": data["material"],
+                           "offset": None, "rotation": None}, data["pin"], "")]
+    return [{"label": name, "mesh": b["mesh"], "pins": pins, "prefix": prefix,
              "E": [b["material"]["youngs_modulus"]] + [r["youngs_modulus"] for r in
                                                        b.get("region", []) if
                                                        r["youngs_modulus"] is not None],
@@ -120,6 +120,11 @@ def _check_barrier(where: str, cfg: dict[str, Any], bodies: list[dict], size: fl
         raise SceneError(f"{where}.dhat must be at least {MIN_DHAT_RATIO:g} times the scene's "
                          f"size ({size:.3g} m), {MIN_DHAT_RATIO * size:.3g} m: smaller "
                          f"distances are lost in the round-off of the coordinates, got {dhat}")
+    for body in bodies if where == "contact" else ():
+        extent = None if body["box"] is None else float(np.min(body["box"][1] - body["box"][0]))
+        if extent is not None and not dhat < extent:  # as the set-up's check, said earlier
+            raise SceneError(f"contact.dhat must be smaller than every body; body "
+                             f"{body['label']!r} is only {extent:.3g} m across, got {dhat}")
     sizes = [h for h in (_element_size(b["mesh"]) for b in bodies) if h is not None]
     if sizes and not dhat < min(sizes):
         raise SceneError(f"{where}.dhat must be smaller than the smallest element size "
@@ -133,15 +138,11 @@ def _check_barrier(where: str, cfg: dict[str, Any], bodies: list[dict], size: fl
             bound = MAX_BARRIER_RATIO * min(E) * dhat / max(sizes) if high > MAX_BARRIER_RATIO \
                 else MIN_BARRIER_RATIO * max(E) * dhat / min(sizes)
             side = "at most" if high > MAX_BARRIER_RATIO else "at least"
+            hint = " (or use \"adaptive\")" if where == "contact" else ""
             raise SceneError(f"{where}.stiffness must be {side} {bound:.3g} Pa for this scene "
                              "(the barrier's stiffness against an element's, (kappa / E) "
                              f"(h / dhat), within [{MIN_BARRIER_RATIO:g}, "
-                             f"{MAX_BARRIER_RATIO:g}]), got {kappa} (or use \"adaptive\")"
-                             if where == "contact" else
-                             f"{where}.stiffness must be {side} {bound:.3g} Pa for this scene "
-                             "(the barrier's stiffness against an element's, (kappa / E) "
-                             f"(h / dhat), within [{MIN_BARRIER_RATIO:g}, "
-                             f"{MAX_BARRIER_RATIO:g}]), got {kappa}")
+                             f"{MAX_BARRIER_RATIO:g}]), got {kappa}{hint}")
     if cfg["friction"] > MAX_FRICTION:
         raise SceneError(f"{where}.friction must be at most {MAX_FRICTION:g} (a Coulomb "
                          f"coefficient; real materials are below about 2), got {cfg['friction']}")
