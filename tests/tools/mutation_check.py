@@ -358,6 +358,10 @@ MUTATIONS: list[Mutation] = [
              "            if separation(t) <= gap:", "            if separation(t) < -1.0:",
              ("tests/test_contact_ends.py::test_handles_driven_into_each_other_are_refused",),
              "handles driven into each other not detected"),
+    Mutation("library-error-traceback", "fem_anim/cli.py",
+             "except (MemoryError, RuntimeError) as err:", "except ArithmeticError as err:",
+             ("tests/test_contact_ends.py::test_library_error_is_one_line_and_exit_2",),
+             "a MemoryError or RuntimeError of ipctk/PETSc reaches the user as a traceback"),
 ]
 
 
