@@ -352,7 +352,8 @@ MUTATIONS: list[Mutation] = [
              "no watcher: a second signal inside a library call is not acted on"),
     Mutation("stiffness-bound-by-sign", "fem_anim/scene/contact_limits.py",
              "if high > MAX_BARRIER_RATIO or low < MIN_BARRIER_RATIO:", "if False:",
-             ("tests/test_contact_ends.py::test_hostile_contact_settings_give_one_line_and_exit_2",),
+             ("tests/test_contact_ends.py::test_hostile_contact_settings_give_one_line_and_"
+              "exit_2",),
              "contact.stiffness bounded only by its sign: 1e150 and 1e-150 accepted"),
     Mutation("handles-meet-never", "fem_anim/scene/contact_limits.py",
              "            if separation(t) <= gap:", "            if separation(t) < -1.0:",
