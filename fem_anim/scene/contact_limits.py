@@ -168,25 +168,44 @@ def _held_boxes(data: dict[str, Any], bodies: list[dict]) -> list[tuple]:
 
 
 def _first_meeting(a: tuple, b: tuple, gap: float, end: float) -> float | None:
-    """The first time in [0, end] at which two translating held boxes come within ``gap``
-    (None: never, or already at rest: that is a shared or touching pin, not a drive)."""
+    """The first time in [0, end] at which two translating held boxes come within ``gap``.
+
+    On each piece of time between the handles' stops the boxes move linearly, so each face
+    condition (box B's lower face at most ``gap`` past box A's upper face, and the reverse,
+    on every axis) holds on an interval of t; the boxes are within ``gap`` on the
+    intersection of these intervals (exact, no sampling).
+
+    Returns:
+        The time, or None: never, or already within ``gap`` at rest (a shared or touching
+        pin, not a drive).
+    """
     (_, A, va, ua), (_, B, vb, ub) = a, b
-    stops = sorted({0.0, end, *(t for t in (ua, ub) if t is not None and t < end)})
 
-    def boxes(t):
-        sa, sb = va * min(t, ua if ua is not None else t), vb * min(t, ub if ub is not None else t)
-        return A + sa, B + sb
+    def shift(v, until, t):
+        return v * (t if until is None else min(t, until))
 
-    def separation(t):
-        P, Q = boxes(t)
-        return float(np.max(np.maximum(Q[0] - P[1], P[0] - Q[1])))
+    def conditions(t):  # c_k(t) <= gap for every k: the boxes are within gap
+        P, Q = A + shift(va, ua, t), B + shift(vb, ub, t)
+        return np.concatenate([Q[0] - P[1], P[0] - Q[1]])
 
-    if separation(0.0) <= gap:
+    if np.all(conditions(0.0) <= gap):
         return None
-    for t0, t1 in zip(stops[:-1], stops[1:]):  # linear motion on each piece
-        for t in np.linspace(t0, t1, 65):
-            if separation(t) <= gap:
-                return float(t)
+    stops = sorted({0.0, end, *(t for t in (ua, ub) if t is not None and t < end)})
+    for t0, t1 in zip(stops[:-1], stops[1:]):
+        c0, c1 = conditions(t0), conditions(t1)
+        lo, hi = t0, t1
+        for k0, k1 in zip(c0, c1):  # linear on the piece: c(t) = k0 + (k1 - k0) s
+            if k1 == k0:
+                if k0 > gap:
+                    lo, hi = 1.0, 0.0
+                continue
+            cross = t0 + (gap - k0) / (k1 - k0) * (t1 - t0)
+            if k1 > k0:
+                hi = min(hi, cross)
+            else:
+                lo = max(lo, cross)
+        if lo <= hi:
+            return float(lo)
     return None
 
 
@@ -196,7 +215,7 @@ def _check_handles(data: dict[str, Any], bodies: list[dict], dhat: float) -> Non
     if not any(np.any(v != 0) for _, _, v, _ in held):
         return
     end = data["time"]["dt"] * data["time"]["steps"]
-    for a, b in itertools.combinations(held, 2):
+    for a, b in itertools.combinations(held if math.isfinite(dhat) else [], 2):
         if np.all(a[2] == b[2]) and a[3] == b[3]:
             continue  # moving together
         t = _first_meeting(a, b, dhat, end)
