@@ -30,7 +30,8 @@ import sys
 from pathlib import Path
 
 from fem_anim.console import OneLineParser, print_error, quiet_jit_logging
-from fem_anim.errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
+from fem_anim.errors import (ConvergenceError, FemAnimError, Interrupted, describe_library_error,
+                             describe_os_error)
 from fem_anim.export.command import add_export_parser, export_command
 from fem_anim.petsc_options import check_cli_options, init_petsc, split_petsc_args
 
@@ -263,6 +264,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print_error("interrupted")
         return 130
+    except (MemoryError, RuntimeError) as err:  # from a compiled library (ipctk, PETSc)
+        print_error(describe_library_error(err))
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ decided on one rank and raised on all of them by the caller.
 import os
 
 __all__ = ["FemAnimError", "SceneError", "MeshError", "ConvergenceError", "Interrupted",
-           "show_value", "describe_os_error"]
+           "show_value", "describe_os_error", "describe_library_error"]
 
 
 class FemAnimError(Exception):
@@ -70,3 +70,24 @@ def show_value(value: object, limit: int = 200) -> str:
     """
     text = repr(value)
     return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def describe_library_error(err: BaseException) -> str:
+    """One line for an error a compiled library raised (ipctk, PETSc, DOLFINx).
+
+    A ``MemoryError`` from the IPC Toolkit means its candidate set outgrew the memory (a
+    ``dhat`` near the size of the bodies, every surface pair a candidate); other errors are
+    named with the library's own first line.
+
+    Args:
+        err: The library's exception (``MemoryError``, ``RuntimeError``, ...).
+
+    Returns:
+        The message, without a traceback: what failed and what to change.
+    """
+    first = (str(err).strip().splitlines() or [""])[0][:300]
+    if isinstance(err, MemoryError):
+        return ("out of memory in a library call (for contact: the IPC Toolkit's candidate "
+                "pairs; reduce contact.dhat or the number of surface elements)"
+                + (f": {first}" if first else ""))
+    return f"a library call failed ({type(err).__name__}): {first or 'no message'}"

@@ -49,7 +49,25 @@ from petsc4py import PETSc
 from fem_anim import compat
 from fem_anim.errors import SceneError
 
-__all__ = ["IPCContact"]
+__all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "narrow_phase_ccd"]
+
+#: Tight inclusion's precision of the time of impact (ipctk's default).
+CCD_TOLERANCE = 1.0e-6
+#: Tight inclusion's cap on interval bisections per candidate pair (ipctk's default is 1e7).
+#: Parallel edges or faces approaching each other never shrink to an inclusion and use the
+#: whole cap; at the cap tight inclusion returns the lower end of the interval it holds, a
+#: conservative time of impact, so the cap bounds the work and never lets a step cross.
+CCD_MAX_ITERATIONS = 10_000
+
+
+def narrow_phase_ccd() -> ipctk.NarrowPhaseCCD:
+    """The narrow phase of every continuous collision detection of :class:`IPCContact`.
+
+    Returns:
+        ipctk's tight-inclusion CCD (Wang et al. 2021: conservative, no false negatives) with
+        :data:`CCD_TOLERANCE` and at most :data:`CCD_MAX_ITERATIONS` bisections per pair.
+    """
+    return ipctk.TightInclusionCCD(CCD_TOLERANCE, CCD_MAX_ITERATIONS)
 
 
 class IPCContact:
@@ -130,6 +148,7 @@ class IPCContact:
             if not cfg["self"]:
                 self.mesh.can_collide = ipctk.make_connected_components_filter(F)
             self.potential = ipctk.BarrierPotential(self.dhat, 1.0, True)
+            self.ccd = narrow_phase_ccd()
             self.collisions = ipctk.NormalCollisions()
             self.collisions.use_area_weighting = True
             self.diagonal = float(np.linalg.norm(np.ptp(rest, axis=0)))
@@ -273,8 +292,8 @@ class IPCContact:
         x0 = self._update()
         dy = self.positions(y)
         start = time.perf_counter()
-        alpha = float(ipctk.compute_collision_free_stepsize(self.mesh, x0, x0 - dy)) \
-            if self.comm.rank == 0 else None
+        alpha = float(ipctk.compute_collision_free_stepsize(
+            self.mesh, x0, x0 - dy, narrow_phase_ccd=self.ccd)) if self.comm.rank == 0 else None
         self.timers["ccd_s"] += time.perf_counter() - start
         return self.comm.bcast(alpha, root=0)
 

@@ -4,7 +4,8 @@
 (:func:`scene_keys`); :mod:`~fem_anim.scene.constraints` says what one key's value may be;
 :mod:`~fem_anim.scene.loading` makes a :class:`Scene` from a file, a TOML string or a dict,
 with ``--set`` overrides; :mod:`~fem_anim.scene.validation` checks it key by key and
-:mod:`~fem_anim.scene.consistency` the keys against each other; :mod:`~fem_anim.scene.modes`
+:mod:`~fem_anim.scene.consistency` the keys against each other (contact settings against the
+scene's scales in :mod:`~fem_anim.scene.contact_limits`); :mod:`~fem_anim.scene.modes`
 holds ``solver.mode``'s named sets of solver keys. A scene is validated once, here, at the
 boundary; everything downstream reads a checked :class:`Scene`.
 """
@@ -12,6 +13,12 @@ boundary; everything downstream reads a checked :class:`Scene`.
 from fem_anim.lazy_exports import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "MAX_BARRIER_RATIO": "contact_limits",
+    "MAX_FRICTION": "contact_limits",
+    "MIN_BARRIER_RATIO": "contact_limits",
+    "MIN_DHAT_RATIO": "contact_limits",
+    "body_box": "contact_limits",
+    "check_contact_limits": "contact_limits",
     "HESSIAN_METHODS": "consistency",
     "MAX_CELLS": "consistency",
     "MIXED_MODELS": "consistency",

@@ -5,7 +5,8 @@
 against each other on the validated data, before anything is built: list lengths match ``mesh.dim``, the mesh is
 not absurdly fine (:data:`MAX_CELLS`), pin and region boxes are not empty, each
 ``[[obstacle]]`` has the keys of its type, ``[initial]`` and ``[render]`` settings fit
-together, and solver settings are compatible with the element and material choices.
+together, solver settings are compatible with the element and material choices, and
+contact settings fit the scene's scales (:mod:`fem_anim.scene.contact_limits`).
 Every rule raises :class:`SceneError` naming the key path, the constraint and the value.
 """
 
@@ -15,6 +16,7 @@ import math
 from typing import Any
 
 from fem_anim.errors import SceneError, show_value
+from fem_anim.scene.contact_limits import check_contact_limits
 
 __all__ = ["check_consistency", "check_render", "HESSIAN_METHODS", "MAX_CELLS", "MIXED_MODELS",
            "MIXED_PRESETS",
@@ -217,6 +219,7 @@ def check_consistency(data: dict[str, Any]) -> None:
     if solver["on_budget"] == "accept" and solver["max_iterations"] is None:
         raise SceneError("solver.on_budget = \"accept\" accepts the iterate after "
                          "solver.max_iterations Newton iterations: set solver.max_iterations")
+    check_contact_limits(data)
 
 
 def _check_bodies(data: dict[str, Any]) -> None:

@@ -27,6 +27,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "Interrupts": "interrupt",
     "SIGNALS": "interrupt",
     "stop_at_once": "interrupt",
+    "GRACE_S": "signal_watch",
     "AdaptiveStepper": "adaptive",
     "RunResult": "run_loop",
     "Simulation": "loop",

@@ -6,7 +6,11 @@ frame, an ``allreduce`` so that every rank stops at the same frame (``mpirun`` f
 SIGINT and SIGTERM to every rank, not necessarily at the same moment), writes a
 checkpoint there, and raises :class:`~fem_anim.errors.Interrupted`. A second signal
 does not wait for the frame to end: it raises at once (the last periodic checkpoint
-and the frames so far stay on disk either way; nothing is deleted).
+and the frames so far stay on disk either way; nothing is deleted). Inside one long call
+of a compiled library (ipctk's CCD, a factorisation) no Python handler runs until the call
+returns; there the watcher process of :mod:`fem_anim.simulation.signal_watch`, which sees
+every signal through the wakeup descriptor, ends the run a few seconds (its ``GRACE_S``)
+after the second signal unless the run has stopped by itself.
 
 A launcher that dies without forwarding a signal (``mpirun`` killed with SIGKILL; OpenMPI 5
 also puts every rank in a process group of its own, so a signal to the launcher's group
@@ -20,11 +24,14 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 import threading
 
 from mpi4py import MPI
 
 from fem_anim.errors import Interrupted
+from fem_anim.simulation import signal_watch
 
 __all__ = ["Interrupts", "SIGNALS", "stop_at_once"]
 
@@ -55,18 +62,52 @@ class _Handlers:
 
 class Interrupts(_Handlers):
     """Context manager: a signal of :data:`SIGNALS` is noted, and every rank stops at the
-    end of the same frame (:meth:`pending`); a second one raises at once."""
+    end of the same frame (:meth:`pending`); a second one raises at once, or, inside a long
+    library call, the watcher process ends the run (module docstring)."""
 
     def __init__(self, comm: MPI.Comm):
         super().__init__()
         self.comm = comm
         self.received: int | None = None
         self._parent: int | None = None  # a parallel run's launcher (or its daemon)
+        self._watcher: subprocess.Popen | None = None
 
     def __enter__(self) -> Interrupts:
         if self.comm.size > 1:
             self._parent = os.getppid()
-        return super().__enter__()
+        super().__enter__()
+        if self._previous:  # handlers installed (main thread): watch inside library calls
+            self._watch()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        super().__exit__(*exc)
+        if self._watcher is not None:
+            signal.set_wakeup_fd(self._wakeup_before)
+            os.close(self._pipe)  # the watcher reads the end of the run and exits
+            self._watcher.wait()
+            self._watcher = None
+
+    def _watch(self) -> None:
+        """Start the watcher process on the reading end of a new wakeup pipe."""
+        read, write = os.pipe()
+        os.set_blocking(write, False)
+        try:  # named "signal-watch", its source on stdin: it is no fem_anim process
+            self._watcher = subprocess.Popen(
+                ["signal-watch", "-I", "-S", "-", str(read), str(os.getpid()),
+                 str(signal_watch.GRACE_S), ",".join(str(int(s)) for s in SIGNALS)],
+                executable=sys.executable, pass_fds=(read,), stdin=subprocess.PIPE,
+                start_new_session=True)
+            with open(signal_watch.__file__, "rb") as source:
+                self._watcher.stdin.write(source.read())
+            self._watcher.stdin.close()
+        except OSError:  # no process to spare: signals still stop the run between calls
+            os.close(write)
+            return
+        finally:
+            os.close(read)
+        self._pipe = write
+        self._wakeup_before = signal.set_wakeup_fd(write, warn_on_full_buffer=False)
 
     def _handle(self, signum: int, frame) -> None:
         if self.received is not None:  # the second signal: stop now

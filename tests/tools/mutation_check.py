@@ -693,6 +693,29 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_bench_trade_bodies.py::test_reference_of_a_contact_scene_is_one_the_"
               "scene_allows",),
              "the reference of a contact scene asks for P2, which [contact] refuses"),
+    # -- every contact scene ends (tests/test_contact_ends.py) --------------------------------
+    Mutation("ccd-unbounded", "fem_anim/contact/ipc.py",
+             "CCD_MAX_ITERATIONS = 10_000", "CCD_MAX_ITERATIONS = 10_000_000",
+             ("tests/test_contact_ends.py::test_face_to_face_cubes_finish",),
+             "tight inclusion's bisection cap back at ipctk's 1e7: one CCD call takes ~35 s"),
+    Mutation("no-signal-watcher", "fem_anim/simulation/interrupt.py",
+             "            self._watch()\n", "            pass\n",
+             ("tests/test_contact_ends.py::test_second_signal_stops_a_run_inside_a_library_call",),
+             "no watcher: a second signal inside a library call is not acted on"),
+    Mutation("stiffness-bound-by-sign", "fem_anim/scene/contact_limits.py",
+             "if high > MAX_BARRIER_RATIO or low < MIN_BARRIER_RATIO:", "if False:",
+             ("tests/test_contact_ends.py::test_hostile_contact_settings_give_one_line_and_"
+              "exit_2",),
+             "contact.stiffness bounded only by its sign: 1e150 and 1e-150 accepted"),
+    Mutation("handles-meet-never", "fem_anim/scene/contact_limits.py",
+             "        if lo <= hi:\n            return float(lo)",
+             "        if lo < hi - end:\n            return float(lo)",
+             ("tests/test_contact_ends.py::test_handles_driven_into_each_other_are_refused",),
+             "handles driven into each other not detected"),
+    Mutation("library-error-traceback", "fem_anim/cli.py",
+             "except (MemoryError, RuntimeError) as err:", "except ArithmeticError as err:",
+             ("tests/test_contact_ends.py::test_library_error_is_one_line_and_exit_2",),
+             "a MemoryError or RuntimeError of ipctk/PETSc reaches the user as a traceback"),
 ]
 
 def copy_tree(dest: Path) -> None:
