@@ -341,6 +341,34 @@ MUTATIONS: list[Mutation] = [
              "            total",
              ("tests/test_reference_comparison.py::test_step_objective",),
              "the inertia term's value taken at x + y instead of x - y"),
+    # -- contact at animation pace: safe integrator, kappa that stays put, recorded steps --
+    Mutation("contact-default-integrator", "fem_anim/scene/contact_integrator.py",
+             'CONTACT_INTEGRATOR = "implicit_euler"', 'CONTACT_INTEGRATOR = "newmark"',
+             ("tests/test_contact_pace.py::test_contact_scene_defaults_to_implicit_euler_and_"
+              "refuses_newmark",),
+             "a contact scene defaults to newmark again"),
+    Mutation("contact-newmark-allowed", "fem_anim/scene/contact_integrator.py",
+             'CONTACT_INTEGRATORS = ("implicit_euler", "bdf2")',
+             'CONTACT_INTEGRATORS = ("implicit_euler", "bdf2", "newmark")',
+             ("tests/test_contact_pace.py::test_contact_scene_defaults_to_implicit_euler_and_"
+              "refuses_newmark",),
+             "newmark accepted in a contact scene"),
+    Mutation("kappa-rebalanced-each-step", "fem_anim/contact/ipc.py",
+             "value = self.kappa_floor if self.balanced else max(kappa, self.kappa_floor)",
+             "value = kappa",
+             ("tests/test_contact_pace.py::test_stats_record_the_barrier_and_kappa_stays_put_"
+              "at_rest",),
+             "kappa re-balanced at every step start (changes while nothing changes)"),
+    Mutation("stats-min-distance-unrecorded", "fem_anim/contact/ipc.py",
+             '"min_distance": self.comm.bcast(d, root=0)', '"min_distance": self.dhat',
+             ("tests/test_contact_pace.py::test_stats_record_the_barrier_and_kappa_stays_put_"
+              "at_rest",),
+             "stats.csv records d-hat as the smallest distance"),
+    Mutation("energy-line-handles-as-percent", "fem_anim/simulation/energy_report.py",
+             'if report.get("moving_pins"):', 'if False:',
+             ("tests/test_contact_pace.py::test_energy_line_separates_handle_work_and_is_calm_"
+              "for_dissipation",),
+             "a handle-driven scene gets a drift percentage again"),
 ]
 
 
