@@ -283,6 +283,19 @@ class IPCContact:
         self.timers["ccd_s"] += time.perf_counter() - start
         return self.comm.bcast(alpha, root=0)
 
+    def exact_hessian(self, exact: bool) -> None:
+        """Assemble the barrier's and friction's exact Hessian (True) or IPC's per-pair PSD
+        projection (False, the default).
+
+        The projection makes every Newton direction a descent direction but changes the
+        Hessian where a pair's is indefinite, so Newton converges only linearly near a
+        resting contact; near a strict minimiser the exact Hessian of g is positive definite
+        and restores quadratic convergence (:class:`fem_anim.solver.minimiser.Minimiser`
+        switches to it once Newton's steps are small).
+        """
+        self.projection = ipctk.PSDProjectionMethod.NONE if exact else \
+            ipctk.PSDProjectionMethod.CLAMP
+
     # -- stiffness schedule -------------------------------------------------------------------
     def stage(self, weight: float, grad_energy: np.ndarray, average_mass: float,
               h: float) -> None:
