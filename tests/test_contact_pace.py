@@ -160,3 +160,79 @@ def test_energy_line_separates_handle_work_and_is_calm_for_dissipation():
              "total_energy": 0.002}]
     line = describe_energy(energy_report(rows, initial, pile), pile)
     assert "as designed" in line and "GAINED" not in line and "damp" in line, line
+
+
+# -- 2. Newton that settles: IPC's step test, and each step's equations still hold ------------
+def _frame_dofs(sim, frame: np.ndarray) -> np.ndarray:
+    """A written frame (input vertex order) as local dof values of V (serial)."""
+    g = sim.gather
+    u = np.zeros(sim.problem.u.x.array.size)
+    u.reshape(-1, g.bs)[g.node_to_dof] = frame[g.input_index]
+    return u
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="re-reads the files on one rank")
+def test_each_step_satisfies_its_equations_from_the_written_outputs(tmp_path):
+    """Re-assemble implicit Euler's residual M (x - y) + h^2 (grad E + kappa grad B + grad D)
+    of every written step from the trajectory and stats.csv's kappa alone: at most 1e-6 of
+    its largest force term (inertia, gravity, elastic and obstacle, IPC barrier and
+    friction), with IPC's step test stopping Newton."""
+    from dolfinx.fem import petsc as fem_petsc
+    from petsc4py import PETSc
+
+    from fem_anim.runs import open_run
+    from fem_anim.simulation.loop import Simulation
+
+    text = STACK.format(steps=10)
+    rows, _, out = run(tmp_path, text)
+    assert all(int(r["retries"]) == 0 and r["snes_reason"] == "5" for r in rows)
+    written = open_run(out)
+    sim = Simulation(Scene.from_toml(text))
+    p = sim.problem
+    M = fem_petsc.assemble_matrix(p.mass_form)
+    M.assemble()
+    vec = lambda a: PETSc.Vec().createWithArray(a.copy())  # noqa: E731
+    frames = [_frame_dofs(sim, written.displacement(k)) for k in range(len(written.times))]
+    assert len(frames) == len(rows) + 1
+    worst = 0.0
+    for n, row in enumerate(rows):
+        h = float(row["dt"])
+        u_n, x = frames[n], frames[n + 1]
+        v_n = (frames[n] - frames[n - 1]) / h if n else np.zeros_like(u_n)
+        y = u_n + h * v_n
+        w = h * h
+        p.stage(u_n, y, w, float(row["time"]), h)
+        p.u.x.array[:] = u_n
+        p.ipc.restage(float(row["barrier_stiffness"]), h)
+        assert float(row["dhat"]) == p.ipc.dhat
+        p.u.x.array[:] = x
+        p.update_quadrature_data()
+        inertia = vec(x - y)
+        M.mult(vec(x - y), inertia)
+        gravity = p.constant_terms.gradient.copy()
+        gravity.scale(w)
+        potential = fem_petsc.assemble_vector(p.potential_gradient_form)
+        potential.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        potential.scale(w)
+        elastic = potential.copy()
+        elastic.axpy(-1.0, gravity)  # elastic and the ground's barrier and friction
+        barrier = vec(np.zeros_like(x))
+        p.ipc.add_gradient(barrier, w)
+        terms = [inertia, gravity, elastic, barrier]
+        r = sum(t.array for t in terms)
+        largest = max(t.norm() for t in terms)
+        worst = max(worst, np.linalg.norm(r) / largest)
+        assert np.linalg.norm(r) <= 1e-6 * largest, (n + 1, np.linalg.norm(r) / largest)
+        for t in terms + [potential]:
+            t.destroy()
+    assert worst > 0.0
+    M.destroy()
+
+
+def test_bodies_at_rest_take_at_most_two_newton_iterations(tmp_path):
+    """Two cubes at rest on the ground (the upper landed): at most 2 Newton iterations a
+    step, every step stopped by IPC's test, none at the round-off floor."""
+    rows, _, _ = run(tmp_path, STACK.format(steps=30))
+    assert all(r["snes_reason"] == "5" for r in rows), [r["snes_reason"] for r in rows]
+    assert max(int(r["newton_its"]) for r in rows[-10:]) <= 2, \
+        [int(r["newton_its"]) for r in rows]

@@ -317,6 +317,20 @@ class IPCContact:
         if self.cfg["friction"] > 0:
             self._stage_friction(h)
 
+    def restage(self, kappa: float, h: float) -> None:
+        """Use the barrier stiffness ``kappa`` (in E, Pa: ``stats.csv``'s
+        ``barrier_stiffness``) and lag friction at the current ``u`` = u_n, to re-check a
+        written step's equations (collective).
+
+        Args:
+            kappa: The step's recorded barrier stiffness.
+            h: The step size (s).
+        """
+        self.kappa = float(kappa)
+        self.friction = None
+        if self.cfg["friction"] > 0:
+            self._stage_friction(h)
+
     def _stage_friction(self, h: float) -> None:
         """IPC's lagged friction (section 5): normal forces and tangent bases at x_n,
 

@@ -369,6 +369,27 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_contact_pace.py::test_energy_line_separates_handle_work_and_is_calm_"
               "for_dissipation",),
              "a handle-driven scene gets a drift percentage again"),
+    # -- Newton that settles: IPC's step test with its force check, exact Hessian near rest --
+    Mutation("step-test-without-force-check", "fem_anim/solver/stopping.py",
+             "                    self.forces_balanced(fnorm, x):", "                    True:",
+             ("tests/test_contact_pace.py::test_each_step_satisfies_its_equations_from_the_"
+              "written_outputs",),
+             "IPC's step test alone ends a step (its equations no longer hold to 1e-6)"),
+    Mutation("force-check-loose", "fem_anim/solver/stopping.py",
+             "FORCE_TOL = 1e-6", "FORCE_TOL = 1e-3",
+             ("tests/test_contact_pace.py::test_each_step_satisfies_its_equations_from_the_"
+              "written_outputs",),
+             "the force check asks 1e-3 of the largest force term instead of 1e-6"),
+    Mutation("barrier-hessian-always-projected", "fem_anim/solver/minimiser.py",
+             "self.problem.ipc.exact_hessian(True)", "self.problem.ipc.exact_hessian(False)",
+             ("tests/test_contact_pace.py::test_bodies_at_rest_take_at_most_two_newton_"
+              "iterations",),
+             "the barrier's Hessian stays PSD-projected near rest (linear convergence)"),
+    Mutation("contact-stopping-auto-is-norm", "fem_anim/solver/stopping.py",
+             'return "step" if contact and not saddle else "norm"', 'return "norm"',
+             ("tests/test_contact_pace.py::test_bodies_at_rest_take_at_most_two_newton_"
+              "iterations",),
+             "a contact scene keeps the residual-norm test relative to r0"),
 ]
 
 
