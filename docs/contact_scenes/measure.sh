@@ -5,6 +5,9 @@ set -e
 out=${OUT:-/tmp/contact_measure}
 run() { tag=$1; shift; .venv/bin/fem-anim run -q -o "$out/$tag" "$@"; }
 run pile demos/pile.toml
+run pile_norm demos/pile.toml --set 'solver.stopping="norm"'
+run cubes docs/contact_scenes/stacked_cubes.toml
+run cubes_norm docs/contact_scenes/stacked_cubes.toml --set 'solver.stopping="norm"'
 run pile_decrement demos/pile.toml --set 'solver.stopping="decrement"' --set solver.decrement_tol=1e-10
 run jelly demos/jelly_cube.toml
 run ball_bdf2 docs/contact_scenes/ball_wall.toml --set 'time.integrator="bdf2"'
