@@ -111,11 +111,12 @@ def scene_diagonal(comm, points: np.ndarray) -> float:
         comm: The mesh's communicator.
         points: This rank's (n, gdim) rest coordinates (n may be 0).
     """
-    lo = points.min(axis=0) if points.size else np.full(points.shape[1], np.inf)
-    hi = points.max(axis=0) if points.size else np.full(points.shape[1], -np.inf)
-    lo = comm.allreduce(lo, op=MPI.MIN)
-    hi = comm.allreduce(hi, op=MPI.MAX)
-    return float(np.linalg.norm(hi - lo))
+    n = points.shape[1]
+    local = np.concatenate([points.min(axis=0), -points.max(axis=0)]) if points.size \
+        else np.full(2 * n, np.inf)
+    bounds = np.empty_like(local)
+    comm.Allreduce(np.ascontiguousarray(local, dtype=float), bounds, op=MPI.MIN)
+    return float(np.linalg.norm(-bounds[n:] - bounds[:n]))
 
 
 def reason_name(enum, value: int) -> str:
