@@ -9,10 +9,11 @@ cannot say, each in a module of its own:
 * ``method``: :data:`NONLINEAR_METHODS`, each a layer of PETSc options (Newton with
   backtracking, trust region, L-BFGS, nonlinear CG, gradient descent);
 * ``stopping``, ``step_tol``, ``max_iterations``, ``on_budget``: when a step stops and what
-  it reports (:mod:`fem_anim.solver.stopping`; ``"auto"``: IPC's step test with contact). The budget counts every direction computed, one whose
-  line search or linear solve failed and the polish's full steps included, and replaces the
-  preset's ``snes_max_it``; ``max_iterations = 1`` is one Newton step with line search from
-  the predictor, the linearly implicit step of Baraff and Witkin;
+  it reports (:mod:`fem_anim.solver.stopping`; ``"auto"``: IPC's step test with contact).
+  The budget counts every direction computed, one whose line search or linear solve failed
+  and the polish's full steps included, and replaces the preset's ``snes_max_it``;
+  ``max_iterations = 1`` is one Newton step with line search from the predictor, the
+  linearly implicit step of Baraff and Witkin;
 * ``hessian``: which Hessian each Newton iteration uses
   (:mod:`fem_anim.solver.hessian_choice`), each step's iterations counted per kind;
 * ``hessian_update``: how often it is rebuilt (:mod:`fem_anim.solver.hessian_reuse`);

@@ -20,7 +20,7 @@ iteration (``SNESSetConvergenceTest``):
   step is small. ``"auto"`` (the default) is ``"step"`` for a scene with contact
   (obstacles or ``[contact]``) and ``"norm"`` for any other (:func:`resolve_stopping`).
 
-Either test also stops at the *round-off floor*: an iteration that neither halves ||r||
+Each test also stops at the *round-off floor*: an iteration that neither halves ||r||
 nor changes g by more than its floating-point resolution (:func:`resolution`) has nothing
 left to gain and stops with :data:`ROUNDOFF_REASON`, as does a line search that fails
 because the predicted decrease is below that resolution (:func:`at_objective_roundoff`).
@@ -291,8 +291,8 @@ def polish(m, x: PETSc.Vec, max_steps: int = 5, assemble: bool = True) -> tuple[
 
     Returns:
         The SNES reason to report (CONVERGED_FNORM_ABS / _RELATIVE, :data:`DECREMENT_REASON`,
-        :data:`STEP_REASON`, or :data:`POLISH_FAILED_REASON` if the test is still not met: x is kept, as
-        converged as double precision allows) and the final residual norm.
+        :data:`STEP_REASON`, or :data:`POLISH_FAILED_REASON` if the test is still not met:
+        x is kept, as converged as double precision allows) and the final residual norm.
     """
     stop = m.stop
     _, atol, _, _ = m.snes.getTolerances()
