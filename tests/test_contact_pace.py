@@ -176,8 +176,9 @@ def _frame_dofs(sim, frame: np.ndarray) -> np.ndarray:
 def test_each_step_satisfies_its_equations_from_the_written_outputs(tmp_path):
     """Re-assemble implicit Euler's residual M (x - y) + h^2 (grad E + kappa grad B + grad D)
     of every written step from the trajectory and stats.csv's kappa alone: at most 1e-6 of
-    its largest force term (inertia, gravity, elastic and obstacle, IPC barrier and
-    friction), with IPC's step test stopping Newton."""
+    its largest force term (inertia and the momenta h M v_{n+1}, h M v_n it is the
+    difference of, gravity, elastic and obstacle, IPC barrier and friction), with IPC's
+    step test stopping Newton."""
     from dolfinx.fem import petsc as fem_petsc
     from petsc4py import PETSc
 
@@ -221,10 +222,13 @@ def test_each_step_satisfies_its_equations_from_the_written_outputs(tmp_path):
         p.ipc.add_gradient(barrier, w)
         terms = [inertia, gravity, elastic, barrier]
         r = sum(t.array for t in terms)
-        largest = max(t.norm() for t in terms)
+        momenta = [M.createVecLeft() for _ in range(2)]  # h M v_{n+1}, h M v_n
+        M.mult(vec(x - u_n), momenta[0])
+        M.mult(vec(y - u_n), momenta[1])
+        largest = max(t.norm() for t in terms + momenta)
         worst = max(worst, np.linalg.norm(r) / largest)
         assert np.linalg.norm(r) <= 1e-6 * largest, (n + 1, np.linalg.norm(r) / largest)
-        for t in terms + [potential]:
+        for t in terms + momenta + [potential]:
             t.destroy()
     assert worst > 0.0
     M.destroy()

@@ -222,8 +222,9 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
     def force_scale(self, x: PETSc.Vec) -> float:
         """The largest 2-norm, over the free dofs, of the terms of grad g at x (collective).
 
-        The terms of the residual r = grad g (seed eq. 4): inertia M (x - y), Rayleigh
-        damping, w times the assembled part of grad E (elastic energy and obstacles'
+        The terms of the residual r = grad g (seed eq. 4): inertia M (x - y) and the two
+        momenta it is the difference of, M (x - u_n) and M (y - u_n) (h M v_{n+1} and
+        h M v_n for implicit Euler: a body in free flight has no other), Rayleigh damping, w times the assembled part of grad E (elastic energy and obstacles'
         barrier and friction), w times gravity's constant gradient, and w times the IPC
         barrier's and lagged friction's gradient. At a step's solution they sum to zero;
         the stopping test asks ||r|| to be small against the largest of them.
@@ -246,12 +247,16 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
 
         x.copy(z)
         fem_petsc.set_bc(z, self.bcs)  # the pins at their values, as the residual has them
-        for term, Q in zip(ct.terms, ct.matrices):  # inertia, damping: s Q (x - a)
-            z.copy(work)
-            work.axpy(-1.0, compat.petsc_vec(term.anchor))
-            Q.mult(work, Qz)
-            Qz.scale(1.0 if term.scale is None else float(term.scale.value))
-            measure(Qz)
+        for k, (term, Q) in enumerate(zip(ct.terms, ct.matrices)):  # inertia, damping
+            pairs = [(z, term.anchor)]  # s Q (x - a)
+            if k == 0:  # the inertia's two momenta: M (x - u_n) and M (y - u_n)
+                pairs += [(z, self.u_prev), (compat.petsc_vec(term.anchor), self.u_prev)]
+            for end, start in pairs:
+                end.copy(work)
+                work.axpy(-1.0, compat.petsc_vec(start))
+                Q.mult(work, Qz)
+                Qz.scale(1.0 if term.scale is None else float(term.scale.value))
+                measure(Qz)
         if ct.gradient is not None:  # gravity: w f
             ct.gradient.copy(work)
             work.scale(float(ct.linear_scale.value))

@@ -14,8 +14,9 @@ iteration (``SNESSetConvergenceTest``):
   at rest stops as soon as Newton moves it less than a fraction of its size per second.
   A small step alone does not make the step's equations hold, so the test also asks that
   the residual be small against the step's own forces: ||r|| <= :data:`FORCE_TOL` x the
-  largest of the 2-norms of the terms of grad g (inertia, damping, w grad E's elastic and
-  obstacle part, w times gravity, w times the IPC barrier and friction; over the free dofs:
+  largest of the 2-norms of the terms of grad g (inertia and the momenta it is the difference
+  of, damping, w grad E's elastic and obstacle part, w times gravity, w times the IPC barrier
+  and friction; over the free dofs:
   :meth:`fem_anim.problem.objective.EnergyProblem.force_scale`), evaluated only once the
   step is small. ``"auto"`` (the default) is ``"step"`` for a scene with contact
   (obstacles or ``[contact]``) and ``"norm"`` for any other (:func:`resolve_stopping`).
