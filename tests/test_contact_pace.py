@@ -243,3 +243,20 @@ def test_bodies_at_rest_take_at_most_two_newton_iterations(tmp_path):
     assert all(r["snes_reason"] == "5" for r in rows), [r["snes_reason"] for r in rows]
     assert max(int(r["newton_its"]) for r in rows[-8:]) <= 2, \
         [int(r["newton_its"]) for r in rows]
+
+
+def test_auto_stopping_is_ipc_step_test_only_for_newton_with_contact():
+    """``"auto"``: IPC's step test for a Newton step with contact; the norm test for a scene
+    without contact, a saddle point, or a method without a full Newton step to measure;
+    ``"step"`` named where it cannot apply is one error."""
+    from fem_anim.solver.stopping import resolve_stopping
+
+    assert resolve_stopping("auto", True, False, True) == "step"
+    assert resolve_stopping("auto", False, False, True) == "norm"
+    assert resolve_stopping("auto", True, True, True) == "norm"
+    assert resolve_stopping("auto", True, False, False) == "norm"
+    assert resolve_stopping("decrement", True, False, True) == "decrement"
+    assert resolve_stopping("step", False, False, True) == "step"
+    for saddle, newton in ((True, True), (False, False)):
+        with pytest.raises(ValueError, match='solver.stopping = "step" needs'):
+            resolve_stopping("step", True, saddle, newton)

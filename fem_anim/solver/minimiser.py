@@ -82,7 +82,7 @@ class Minimiser:
 
     Raises:
         FemAnimError: for a ``mat_type`` other than aij or baij, options PETSc rejects, or
-            ``stopping = "step"`` for a saddle point.
+            ``stopping = "step"`` for a saddle point or another method than Newton.
     """
 
     def __init__(self, problem, options: dict[str, str], prefix: str = DEFAULT_PREFIX,
@@ -108,7 +108,10 @@ class Minimiser:
         contact = getattr(problem, "ipc", None) is not None or \
             getattr(problem, "contact", None) is not None
         try:
-            stopping = resolve_stopping(settings.get("stopping", "norm"), contact, self.saddle)
+            newton = settings.get("method", "newton") == "newton" and \
+                getattr(problem, "constant_terms", None) is not None
+            stopping = resolve_stopping(settings.get("stopping", "norm"), contact, self.saddle,
+                                        newton)
         except ValueError as err:
             raise FemAnimError(str(err)) from None
         self.stop = StoppingTest(stopping, settings.get("decrement_tol", 0.0), self.saddle)

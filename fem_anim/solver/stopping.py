@@ -89,19 +89,28 @@ def resolution(*values: float) -> float:
     return ROUNDOFF_ULPS * np.finfo(float).eps * max(abs(v) for v in values)
 
 
-def resolve_stopping(stopping: str, contact: bool, saddle: bool) -> str:
+def resolve_stopping(stopping: str, contact: bool, saddle: bool, newton: bool = True) -> str:
     """The test ``solver.stopping`` names: ``"auto"`` is ``"step"`` with contact (a barrier's
-    residual spans too many orders for a test relative to r0), ``"norm"`` otherwise and for
-    a saddle point (its decrement and force check bound nothing).
+    residual spans too many orders for a test relative to r0), ``"norm"`` otherwise, for a
+    saddle point (its decrement and force check bound nothing) and for a method other than
+    Newton with line search (no full Newton step to measure).
+
+    Args:
+        stopping: ``solver.stopping``.
+        contact: Whether the scene has contact (obstacles or ``[contact]``).
+        saddle: Whether the step is a saddle point.
+        newton: Whether ``solver.method`` is ``"newton"`` with its split constant terms
+            (an implicit displacement step: the force check's terms exist).
 
     Raises:
-        ValueError: ``"step"`` named for a saddle point.
+        ValueError: ``"step"`` named for a saddle point or another method.
     """
     if stopping == "auto":
-        return "step" if contact and not saddle else "norm"
-    if stopping == "step" and saddle:
-        raise ValueError("solver.stopping = \"step\" is refused with element.formulation = "
-                         "\"mixed\" (a saddle point: use \"norm\")")
+        return "step" if contact and not saddle and newton else "norm"
+    if stopping == "step" and (saddle or not newton):
+        raise ValueError("solver.stopping = \"step\" needs solver.method = \"newton\" on an "
+                         "implicit displacement step (not element.formulation = \"mixed\" "
+                         "nor an explicit integrator): use \"norm\"")
     return stopping
 
 
