@@ -128,6 +128,9 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     overrides = (['solver.mode="preview"'] if args.preview else []) + args.overrides
     scene = load_scene(args.scene, overrides)  # validate before importing dolfinx
     out = _output_directory(args, scene)
+    from fem_anim.scene.contact_integrator import integrator_note
+    if (note := integrator_note(scene.data)) and not args.quiet and MPI.COMM_WORLD.rank == 0:
+        print(f"fem-anim: {note}", file=sys.stderr)
     from fem_anim.output.provenance import software_versions
     from fem_anim.output.rundir import read_manifest, write_manifest
     from fem_anim.simulation.energy_report import (describe_energy, energy_report,

@@ -25,11 +25,14 @@ Dirichlet rows). Its pattern couples dofs the elastic sparsity does not: the mat
 accepts new nonzeros (``NEW_NONZERO_ALLOCATION_ERR`` off), which PETSc keeps from then
 on, so only a step meeting new pairs pays for the reallocation.
 
-Stiffness ``"adaptive"`` is IPC's schedule: at each step start ``initial_barrier_stiffness``
+Stiffness ``"adaptive"`` is IPC's schedule: at a step start ``initial_barrier_stiffness``
 balances the barrier's gradient against w grad E (with ipctk's lower bound from the mass
 and the scene size), never below the value ``update_barrier_stiffness`` left after the
-previous step (it grows kappa while the minimum distance keeps falling); kappa is fixed
-within a step, so the objective is one function during each minimisation.
+previous step (it grows kappa while the minimum distance keeps falling). The balance is
+taken at each step start until a step starts with pairs present, and never after: from
+then on only ``update_barrier_stiffness`` changes kappa_IPC, so a scene at rest keeps one
+barrier. kappa is fixed within a step, so the objective is one function during each
+minimisation.
 
 ipctk runs on one thread: its parallel loops (TBB) sum in an order that changes from run to
 run, so two runs of one scene (and a run resumed from a checkpoint) would differ in their
@@ -132,6 +135,8 @@ class IPCContact:
         # adaptive: 0 until the first step sets it (initial energies: no pair between bodies)
         self.kappa = float(cfg["stiffness"]) if cfg["stiffness"] != "adaptive" else 0.0
         self.kappa_floor = 0.0
+        #: Whether kappa has been balanced against the elastic forces with pairs present
+        self.balanced = False
         self.weight = 1.0
         self._distance = np.inf
         #: IPC's per-pair projection of the Hessian (NONE: the exact Hessian, for tests)
@@ -297,6 +302,19 @@ class IPCContact:
         self.timers["ccd_s"] += time.perf_counter() - start
         return self.comm.bcast(alpha, root=0)
 
+    def exact_hessian(self, exact: bool) -> None:
+        """Assemble the barrier's and friction's exact Hessian (True) or IPC's per-pair PSD
+        projection (False, the default).
+
+        The projection makes every Newton direction a descent direction but changes the
+        Hessian where a pair's is indefinite, so Newton converges only linearly near a
+        resting contact; near a strict minimiser the exact Hessian of g is positive definite
+        and restores quadratic convergence (:class:`fem_anim.solver.minimiser.Minimiser`
+        switches to it once Newton's steps are small).
+        """
+        self.projection = ipctk.PSDProjectionMethod.NONE if exact else \
+            ipctk.PSDProjectionMethod.CLAMP
+
     # -- stiffness schedule -------------------------------------------------------------------
     def stage(self, weight: float, grad_energy: np.ndarray, average_mass: float,
               h: float) -> None:
@@ -315,6 +333,20 @@ class IPCContact:
         self.friction = None
         if self.cfg["stiffness"] == "adaptive":
             self._adapt(weight, grad_energy, average_mass)
+        if self.cfg["friction"] > 0:
+            self._stage_friction(h)
+
+    def restage(self, kappa: float, h: float) -> None:
+        """Use the barrier stiffness ``kappa`` (in E, Pa: ``stats.csv``'s
+        ``barrier_stiffness``) and lag friction at the current ``u`` = u_n, to re-check a
+        written step's equations (collective).
+
+        Args:
+            kappa: The step's recorded barrier stiffness.
+            h: The step size (s).
+        """
+        self.kappa = float(kappa)
+        self.friction = None
         if self.cfg["friction"] > 0:
             self._stage_friction(h)
 
@@ -347,7 +379,10 @@ class IPCContact:
             kappa, self.kappa_max = ipctk.initial_barrier_stiffness(
                 self.diagonal, self.potential.barrier, self.dhat, average_mass / weights,
                 weight * g_energy.ravel(), g_barrier)
-            value = max(kappa, self.kappa_floor)
+            # balanced once, where pairs exist; then only IPC's update moves it, so kappa
+            # stays put while nothing changes (a pile at rest keeps one objective)
+            value = self.kappa_floor if self.balanced else max(kappa, self.kappa_floor)
+            self.balanced = self.balanced or self.num_pairs > 0
             self.kappa_floor = value
             self._distance = self._min_distance(x)
         self.kappa_ipc = self.comm.bcast(value, root=0)
@@ -362,9 +397,10 @@ class IPCContact:
         """What a checkpoint keeps across steps.
 
         Returns:
-            ``{"kappa_floor": ...}``: rank 0's floor of the adaptive kappa.
+            ``{"kappa_floor": ..., "kappa_balanced": ...}``: rank 0's floor of the adaptive
+            kappa and whether it was balanced with pairs present (1.0) or not (0.0).
         """
-        return {"kappa_floor": float(self.kappa_floor)}
+        return {"kappa_floor": float(self.kappa_floor), "kappa_balanced": float(self.balanced)}
 
     def restore(self, state: dict[str, float]) -> None:
         """Continue from a checkpoint.
@@ -373,6 +409,23 @@ class IPCContact:
             state: What :meth:`state` returned (without ``kappa_floor``, the floor is 0).
         """
         self.kappa_floor = float(state.get("kappa_floor", 0.0))
+        self.balanced = bool(state.get("kappa_balanced", 0.0))
+
+    def step_stats(self) -> dict[str, float]:
+        """The contact columns of a step's ``stats.csv`` row, at the current ``u`` (collective).
+
+        Returns:
+            ``barrier_stiffness``: kappa in E (Pa; the objective's barrier is w kappa B),
+            ``dhat`` (m), ``contact_pairs``, ``min_distance`` (m, of the pairs nearer than
+            d_hat; inf without one) and ``friction_lags``: how often the step's friction
+            was lagged (IPC's normal force and tangent basis taken at x_n: 1 with friction).
+        """
+        x = self._update()
+        d = self._min_distance(x) if self.comm.rank == 0 else None
+        return {"barrier_stiffness": self.kappa, "dhat": self.dhat,
+                "contact_pairs": self.comm.bcast(self.num_pairs, root=0),
+                "min_distance": self.comm.bcast(d, root=0),
+                "friction_lags": int(self.friction is not None)}
 
     def finish_step(self) -> None:
         """After an accepted step: IPC's update of kappa from the distance's trend."""

@@ -40,7 +40,8 @@ STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "s
                  "exact_its", "shift_its", "clamp_its", "abs_its", "kinetic", "elastic",
                  "gravity", "contact", "total_energy", "assembly_s", "factor_s",
                  "linear_solve_s", "other_s", "solve_wall_s", "step_wall_s", "contact_s",
-                 "contact_pairs", "residual_ratio", "hessian_assemblies", "factorisations"]
+                 "contact_pairs", "residual_ratio", "hessian_assemblies", "factorisations",
+                 "barrier_stiffness", "dhat", "min_distance", "friction_lags"]
 
 
 class VertexGather:

@@ -158,7 +158,9 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         The objective is then g of seed eq. 4 for this step: the predictor, the weight, the
         dissipation's anchor, the pins' prescribed displacement at ``t``, the friction
         smoothing length of obstacles, and IPC's barrier stiffness (adaptive: balanced
-        against w grad E at u_n; collective). Arrays are local dof values of V, ghosts
+        against w grad E at u_n; collective); ``h`` is kept as :attr:`step_size`, the
+        scale of the stopping test's step (a Newton step is small against h times the
+        scene's size). Arrays are local dof values of V, ghosts
         included (a :class:`~fem_anim.simulation.integrators.State`'s), in metres.
 
         Args:
@@ -179,6 +181,8 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         self.u_pred.x.array[:] = u_pred
         self.u_prev.x.array[:] = u_n
         self.weight.value = weight
+        #: The step size h (s): scales IPC's step test (:mod:`fem_anim.solver.stopping`)
+        self.step_size = h
         if self.damped:
             self.damping_coefficient.value, self.u_anchor.x.array[:] = damping
         self.set_pinned_displacement(t)
@@ -214,6 +218,62 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         if pin_rates:
             self.prescribe_pin_rates(t, v, a)
         self.v.x.array[:] = v
+
+    def force_scale(self, x: PETSc.Vec) -> float:
+        """The largest 2-norm, over the free dofs, of the terms of grad g at x (collective).
+
+        The terms of the residual r = grad g (seed eq. 4): inertia M (x - y) and the two
+        momenta it is the difference of, M (x - u_n) and M (y - u_n) (h M v_{n+1} and
+        h M v_n for implicit Euler: a body in free flight has no other), Rayleigh damping, w times the assembled part of grad E (elastic energy and obstacles'
+        barrier and friction), w times gravity's constant gradient, and w times the IPC
+        barrier's and lagged friction's gradient. At a step's solution they sum to zero;
+        the stopping test asks ||r|| to be small against the largest of them.
+
+        Raises:
+            ValueError: for a problem without the constant terms split off (mixed,
+                explicit): its terms are not assembled apart.
+        """
+        if self.constant_terms is None:
+            raise ValueError("the force terms are assembled apart only for an implicit "
+                             "displacement formulation")
+        self.set_state(x)
+        ct = self.constant_terms
+        work, z, Qz = x.duplicate(), x.duplicate(), x.duplicate()
+        sizes = []
+
+        def measure(vec: PETSc.Vec) -> None:
+            fem_petsc.set_bc(vec, self.bcs, None, 0.0)  # free dofs only
+            sizes.append(vec.norm())
+
+        x.copy(z)
+        fem_petsc.set_bc(z, self.bcs)  # the pins at their values, as the residual has them
+        for k, (term, Q) in enumerate(zip(ct.terms, ct.matrices)):  # inertia, damping
+            pairs = [(z, term.anchor)]  # s Q (x - a)
+            if k == 0:  # the inertia's two momenta: M (x - u_n) and M (y - u_n)
+                pairs += [(z, self.u_prev), (compat.petsc_vec(term.anchor), self.u_prev)]
+            for end, start in pairs:
+                end.copy(work)
+                work.axpy(-1.0, compat.petsc_vec(start))
+                Q.mult(work, Qz)
+                Qz.scale(1.0 if term.scale is None else float(term.scale.value))
+                measure(Qz)
+        if ct.gradient is not None:  # gravity: w f
+            ct.gradient.copy(work)
+            work.scale(float(ct.linear_scale.value))
+            measure(work)
+        with work.localForm() as local:  # w times the assembled part of grad E
+            local.set(0.0)
+        fem_petsc.assemble_vector(work, self.residual_form)
+        work.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        measure(work)
+        if self.ipc is not None:  # w (kappa grad B + grad D)
+            with work.localForm() as local:
+                local.set(0.0)
+            self.ipc.add_gradient(work, float(self.weight.value))
+            measure(work)
+        for vec in (work, z, Qz):
+            vec.destroy()
+        return max(sizes)
 
     # -- assembly -------------------------------------------------------------------------
     def set_state(self, x: PETSc.Vec) -> None:

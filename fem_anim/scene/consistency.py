@@ -72,7 +72,7 @@ def _check_formulation(data: dict[str, Any]) -> None:
         raise SceneError(f"time.integrator = \"symplectic_euler\" is refused {where}: the "
                          "constraint must be implicit")
     for key, allowed in (("method", "newton"), ("hessian", "exact"), ("stopping", "norm")):
-        if solver[key] != allowed:
+        if solver[key] != allowed and not (key == "stopping" and solver[key] == "auto"):
             raise SceneError(f"solver.{key} = {solver[key]!r} is refused {where}: the step is "
                              f"a saddle point (use {allowed!r})")
 

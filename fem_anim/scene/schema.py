@@ -214,8 +214,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "preset": Key(str, "cholesky", doc="linear solver preset (fem-anim solvers lists "
                       "them)"),
         "method": Key(str, "newton", choices=NONLINEAR_METHODS, doc="the minimiser"),
-        "stopping": Key(str, "norm", choices=("norm", "decrement"),
-                        doc="residual-norm tests, or the Newton decrement"),
+        "stopping": Key(str, "auto", choices=("auto", "norm", "decrement", "step"),
+                        doc="residual-norm tests, the Newton decrement, or IPC's step test "
+                        "(\"auto\": \"step\" with contact, else \"norm\")"),
+        "step_tol": Key(NUM, 1.0e-3, c.positive, unit="1/s",
+                        doc="stopping = \"step\": ||Newton step||_inf / dt at most this "
+                        "fraction of the scene's bounding-box diagonal per second"),
         "decrement_tol": Key(NUM, 1e-14, c.positive,
                              doc="stopping = \"decrement\": lambda^2/2 at most this, in the "
                              "units of the step objective g"),

@@ -18,6 +18,7 @@ from typing import Any
 from fem_anim.errors import SceneError
 from fem_anim.errors import show_value as _show
 from fem_anim.scene.consistency import check_consistency
+from fem_anim.scene.contact_integrator import check_integrator, choose_integrator
 from fem_anim.scene.constraints import MAX_MAGNITUDE, check_string, key_text
 from fem_anim.scene.schema import (ARRAY_SECTIONS, BODY_ARRAYS, BODY_TABLES, NUM,
                                    OPTIONAL_SECTIONS, REQUIRED, SCHEMA, Key)
@@ -146,7 +147,9 @@ def validate_scene(raw: Mapping[str, Any]) -> dict[str, Any]:
         data["material"] = dict(data["body"][0]["material"])
         if len(data["body"]) > 1 and "contact" not in data:
             data["contact"] = {k: key.default for k, key in SCHEMA["contact"].items()}
+    choose_integrator(raw, data)
     check_consistency(data)
+    check_integrator(data)
     return data
 
 

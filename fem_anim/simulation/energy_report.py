@@ -16,19 +16,14 @@ scale is below the round-off of the energies (E_Young |Omega| 1e-12, a strain of
 body at rest), no relative figure is given. Damping and friction only remove energy: a
 gain is flagged for every scene without moving pins, a loss only for a conservative one.
 
-Newmark and contact. The trapezoidal rule (seed eq. 3) conserves the energy of quadratic
-potentials; its velocity update v_{n+1} = v_n + h/2 (a_n + a_{n+1}) lets the force at the
-start of a step act over half of the step. The IPC barrier's force is large at the deepest
-point of an impact and zero one step later, when the body has left the barrier's range:
-the half-step impulse h/2 a_n then accelerates a body the barrier no longer holds, with no
-potential energy paying for it; a smaller step does not cure it. Lagged friction (IPC:
-pressure and tangent from the step's start) adds to it by the same mechanism (the previous
-step's friction force acts after the slip has turned), and moves the energy up as well as
-down while sliding. It is inherent to the scheme, not a defect of the friction term, which
-is dissipative within its own step (convex, minimal at zero slip): under BDF2 the same
-scenes (jelly cube with and without friction, the sliding block) never rise above their
-initial energy. A Newmark run with obstacles that gains energy is
-flagged with this explanation (:data:`NEWMARK_CONTACT`).
+Newmark and contact: the trapezoidal update applies the barrier force of a step's start over
+half of the next step, after the contact has released, and gains energy at impacts; scenes
+with contact are refused Newmark (:mod:`fem_anim.scene.contact_integrator`).
+
+A scene with moving pins is not given a relative figure: the handles put energy in, and the
+line gives the total energy before and after and what is stored at the end (kinetic,
+elastic, gravity, barrier). A dissipative scene (damping, friction) gets its drift and the
+largest rise above the initial energy, which it should never have.
 """
 
 from __future__ import annotations
@@ -50,14 +45,6 @@ DAMPED_THRESHOLD = 0.05
 #: Energies below E_Young * volume * ROUNDOFF_STRAIN^2 are the solver's round-off, not
 #: motion: no relative figure is computed from them (a body at rest has no "drift").
 ROUNDOFF_STRAIN = 1.0e-6
-
-
-#: Why a Newmark run with contact gains energy (module docstring, "Newmark and contact").
-NEWMARK_CONTACT = ("newmark's trapezoidal rule v_{n+1} = v_n + h/2 (a_n + a_{n+1}) applies "
-                   "the contact (and friction) force of a step's start over half of the next "
-                   "step, after the contact has released or the slip has turned: an impulse "
-                   "no energy paid for; a smaller time.dt does not cure it: use bdf2 or "
-                   "implicit_euler for contact")
 
 
 def moving_pins(scene) -> bool:
@@ -131,17 +118,26 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
     if exchanged > initial.get("roundoff", 0.0):
         drift = (e_end - e0) / exchanged
         excursion = max(abs(r["total_energy"] - e0) for r in rows) / exchanged if rows else 0.0
+    rise = max([0.0] + [r["total_energy"] - e0 for r in rows]) / exchanged \
+        if drift is not None else None
     damped = conservative and drift is not None and drift < -DAMPED_THRESHOLD
     # damping and friction only take energy away: a gain is flagged for them too
     gained = not moving and drift is not None and drift > DAMPED_THRESHOLD
     return {"initial_energy": e0, "final_energy": e_end, "exchanged_energy": exchanged,
-            "drift": drift, "max_excursion": excursion, "conservative": conservative,
+            "drift": drift, "max_excursion": excursion, "max_rise": rise,
+            "moving_pins": moving, "stored_energy": _stored(rows[-1] if rows else initial),
+            "conservative": conservative,
             "damped": damped, "gained": gained, "flagged": damped or gained,
             "friction_newmark": friction and scene["time"]["integrator"] == "newmark",
             "unconverged_steps": [int(r["step"]) for r in rows
                                   if r.get("snes_reason") == POLISH_FAILED_REASON],
             "budget_steps": [int(r["step"]) for r in rows
                              if r.get("snes_reason") == BUDGET_REASON]}
+
+
+def _stored(row: dict) -> dict[str, float]:
+    """The energy held at the end: kinetic, elastic, gravity and the barriers' (J)."""
+    return {k: float(row.get(k) or 0.0) for k in ("kinetic", "elastic", "gravity", "contact")}
 
 
 def _contact(scene) -> bool:
@@ -165,21 +161,32 @@ def describe_energy(report: dict, scene) -> str:
         return (f"no energy exchanged above round-off ({report['exchanged_energy']:.3g} J): "
                 f"the body stayed at rest{unmet}")
     pct = 100.0 * report["drift"]
+    if report.get("moving_pins"):  # handles put energy in: a % of the motion means nothing
+        stored = report.get("stored_energy") or {}
+        held = ", ".join(f"{k} {v:.4g}" for k, v in stored.items() if v)
+        return (f"handles worked on the bodies: total energy {report['initial_energy']:.4g} J "
+                f"-> {report['final_energy']:.4g} J, the handles' work less what damping and "
+                f"friction took (not conserved by design); stored at the end: "
+                f"{held or 'none'} J{unmet}")
+    if not report["conservative"] and not report["gained"]:
+        rise = report.get("max_rise") or 0.0
+        return (f"energy drift {pct:+.3g} % of the exchanged energy "
+                f"({report['exchanged_energy']:.4g} J): taken by damping, friction and "
+                f"{integrator}'s step, as designed; at most {100.0 * rise:.3g} % above its "
+                f"start{unmet}")
     base = (f"energy drift {pct:+.3g} % of the exchanged energy "
             f"({report['exchanged_energy']:.4g} J), max excursion "
             f"{100.0 * report['max_excursion']:.3g} %{unmet}")
     if report["damped"]:
-        # newmark gains energy at impacts (NEWMARK_CONTACT): not advised for contact
+        # newmark is refused with contact (fem_anim.scene.contact_integrator)
         advice = "a smaller time.dt" if integrator == "newmark" or _contact(scene) else \
             "newmark or a smaller time.dt"
         return (base + f"; numerical damping: {integrator} with this time step damped away "
                 f"{-pct:.3g} % of the energy (use {advice} to keep the motion)")
     if report["gained"]:
-        if _contact(scene) and integrator == "newmark":
-            why = NEWMARK_CONTACT + (" (lagged friction adds to it)"
-                                     if report["friction_newmark"] else "")
-        else:
-            why = "the time step or the solver tolerance: use a smaller time.dt"
+        why = "the time step or the solver tolerance: use a smaller time.dt"
+        if _contact(scene) and integrator != "implicit_euler":
+            why += " or time.integrator = \"implicit_euler\" (it cannot gain energy)"
         return base + f"; energy GAINED {pct:.3g} %, not conserved by the scheme: {why}"
     if not report["conservative"]:
         return base + " (not conserved by design: damping, friction or moving pins)"

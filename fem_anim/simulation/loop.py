@@ -271,7 +271,7 @@ class Simulation:
             ConvergenceError: as :meth:`step`, and for a non-finite displacement or energy.
         """
         start = time.perf_counter()
-        self._contact_stats()  # the contact time of this step only (not of failed tries)
+        self._contact_stats(row=False)  # this step's contact time only (not failed tries')
         new, solve = self.step(state, dt)
         energies = self.problem.energies()
         self._check_finite(new, energies)
@@ -291,16 +291,18 @@ class Simulation:
             "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,
             "solve_wall_s": solve.wall_s, "step_wall_s": wall, **self._contact_stats()}
 
-    def _contact_stats(self) -> dict:
-        """Time in ipctk (detection, barrier, CCD; summed since the last row) and the number
-        of active contact pairs at the end of the step (0 without ``[contact]``)."""
+    def _contact_stats(self, row: bool = True) -> dict:
+        """Time in ipctk (detection, barrier, CCD; summed since the last row) and, with
+        ``[contact]``, the step's barrier stiffness, d-hat, pairs, smallest distance and
+        friction lags at its end (:meth:`fem_anim.contact.ipc.IPCContact.step_stats`;
+        0 pairs without ``[contact]``)."""
         ipc = self.problem.ipc
         if ipc is None:
             return {"contact_s": 0.0, "contact_pairs": 0}
         spent = sum(ipc.timers.values())
         for key in ipc.timers:
             ipc.timers[key] = 0.0
-        return {"contact_s": spent, "contact_pairs": self.comm.bcast(ipc.num_pairs, root=0)}
+        return {"contact_s": spent, **(ipc.step_stats() if row else {})}
 
     def _check_finite(self, state: State, energies: dict[str, float]) -> None:
         """No NaN or inf may reach a frame: stop with a clear message instead."""

@@ -8,11 +8,12 @@ cannot say, each in a module of its own:
 
 * ``method``: :data:`NONLINEAR_METHODS`, each a layer of PETSc options (Newton with
   backtracking, trust region, L-BFGS, nonlinear CG, gradient descent);
-* ``stopping``, ``max_iterations``, ``on_budget``: when a step stops and what it reports
-  (:mod:`fem_anim.solver.stopping`). The budget counts every direction computed, one whose
-  line search or linear solve failed and the polish's full steps included, and replaces the
-  preset's ``snes_max_it``; ``max_iterations = 1`` is one Newton step with line search from
-  the predictor, the linearly implicit step of Baraff and Witkin;
+* ``stopping``, ``step_tol``, ``max_iterations``, ``on_budget``: when a step stops and what
+  it reports (:mod:`fem_anim.solver.stopping`; ``"auto"``: IPC's step test with contact).
+  The budget counts every direction computed, one whose line search or linear solve failed
+  and the polish's full steps included, and replaces the preset's ``snes_max_it``;
+  ``max_iterations = 1`` is one Newton step with line search from the predictor, the
+  linearly implicit step of Baraff and Witkin;
 * ``hessian``: which Hessian each Newton iteration uses
   (:mod:`fem_anim.solver.hessian_choice`), each step's iterations counted per kind;
 * ``hessian_update``: how often it is rebuilt (:mod:`fem_anim.solver.hessian_reuse`);
@@ -25,6 +26,13 @@ minimum of g, so g cannot judge a step: SNES gets no objective, and the line sea
 descent direction (d/dalpha ||r(x - alpha y)||^2/2 = -||r||^2 at alpha = 0). Stopping is by
 the residual norms only, and the reported Newton decrement is NaN (r^T H^-1 r of an
 indefinite H bounds nothing).
+
+With IPC's step test (``stopping = "step"``) and ``[contact]``, the Hessian's barrier and
+friction part is IPC's per-pair PSD projection until a Newton step is below the test's
+size, then exact (:meth:`fem_anim.contact.ipc.IPCContact.exact_hessian`): the projected
+Hessian differs from the true one at a resting contact and converges linearly there. If a
+direction from the exact Hessian fails (no descent), the step continues from its last
+iterate with the projection.
 """
 
 from __future__ import annotations
@@ -41,7 +49,8 @@ from fem_anim.solver.hessian_reuse import HessianReuse
 from fem_anim.solver.solve_stats import SolveStats
 from fem_anim.solver.step_bounds import bound_step, filter_inverting
 from fem_anim.solver.stopping import (ROUNDOFF_REASON, StoppingTest, accept_at_budget,
-                                      at_objective_roundoff, finish_at_roundoff, reason_name)
+                                      at_objective_roundoff, finish_at_roundoff, reason_name,
+                                      resolve_stopping, scene_diagonal)
 
 __all__ = ["Minimiser", "NONLINEAR_METHODS"]
 
@@ -68,11 +77,12 @@ class Minimiser:
         options: Merged PETSc options (names without prefix).
         prefix: Options prefix, ending in ``_``.
         settings: The scene's ``[solver]`` keys this class reads: ``stopping``,
-            ``decrement_tol``, ``max_iterations``, ``on_budget``, ``hessian``,
+            ``step_tol``, ``decrement_tol``, ``max_iterations``, ``on_budget``, ``hessian``,
             ``hessian_update``, ``hessian_lag``.
 
     Raises:
-        FemAnimError: for a ``mat_type`` other than aij or baij, or options PETSc rejects.
+        FemAnimError: for a ``mat_type`` other than aij or baij, options PETSc rejects, or
+            ``stopping = "step"`` for a saddle point or another method than Newton.
     """
 
     def __init__(self, problem, options: dict[str, str], prefix: str = DEFAULT_PREFIX,
@@ -95,8 +105,25 @@ class Minimiser:
         self._g_cache: list[tuple[PETSc.Vec, float]] = []
         self._g_seed: tuple[PETSc.Vec, float] | None = None  # seed_objective, next solve
         self.saddle = getattr(problem, "saddle_point", False)
-        self.stop = StoppingTest(settings.get("stopping", "norm"),
-                                 settings.get("decrement_tol", 0.0), self.saddle)
+        contact = getattr(problem, "ipc", None) is not None or \
+            getattr(problem, "contact", None) is not None
+        try:
+            newton = settings.get("method", "newton") == "newton" and \
+                getattr(problem, "constant_terms", None) is not None
+            stopping = resolve_stopping(settings.get("stopping", "norm"), contact, self.saddle,
+                                        newton)
+        except ValueError as err:
+            raise FemAnimError(str(err)) from None
+        self.stop = StoppingTest(stopping, settings.get("decrement_tol", 0.0), self.saddle)
+        #: ``"step"``: ||p||_inf <= step_tol x the bounding-box diagonal x h ends a step
+        self.step_tol = float(settings.get("step_tol", 1e-3)) * scene_diagonal(
+            problem.comm, problem.domain.mesh.geometry.x[:, :problem.domain.mesh.geometry.dim]
+        ) if stopping == "step" else 0.0
+        if stopping == "step":
+            self.stop.forces = problem.force_scale
+        #: ``"step"`` with IPC: the barrier's exact Hessian once a step is small (below)
+        self._exact_near = stopping == "step" and getattr(problem, "ipc", None) is not None
+        self._exact_ok = False
         if not self.saddle:
             snes.setObjective(self.objective)
         snes.setFunction(problem.residual, self.b)
@@ -194,6 +221,10 @@ class Minimiser:
         self.hessian.start_step()
         self.reuse.start_step()
         self.stop.start()
+        self.stop.step_scale = self.step_tol * getattr(self.problem, "step_size", 0.0)
+        self._exact_ok = self._exact_near
+        if self._exact_near:
+            self.problem.ipc.exact_hessian(False)
         self._own_linear_its = 0
         g0 = self.objective(self.snes, x)
         newton_its = linear_its = 0
@@ -205,6 +236,13 @@ class Minimiser:
             # a direction computed and dropped is an iteration too (PETSc leaves it out)
             newton_its += self.snes.getIterationNumber() + (reason in FAILED_DIRECTION)
             linear_its += self.snes.getLinearSolveIterations() + self.hessian.solved()
+            if reason < 0 and self._exact_near and self._exact_ok and \
+                    (self.budget is None or newton_its < self.budget):
+                # the exact barrier Hessian gave no descent: on from x_k, projected
+                self._exact_ok = False
+                self.problem.ipc.exact_hessian(False)
+                self.stop.restarting = True
+                continue
             stalled = reason == PETSc.SNES.ConvergedReason.DIVERGED_LINE_SEARCH and \
                 not self.saddle and at_objective_roundoff(self, x, g0)
             spent = self.budget is not None and newton_its >= self.budget
@@ -295,7 +333,13 @@ class Minimiser:
         g = np.nan if self.saddle else self.objective(snes, snes.getSolution())
         if it > 0:
             self.reuse.check_step(snes.getSolution())
-        return self.stop.test(it, norms[2], g, snes.getTolerances())
+        reason = self.stop.test(it, norms[2], g, snes.getTolerances(), snes.getSolution())
+        if self._exact_ok and reason == 0 and self.stop.steps and \
+                self.stop.steps[-1] <= self.stop.step_scale:
+            # near the minimiser the exact Hessian is positive definite: quadratic
+            # convergence where IPC's per-pair projection converges linearly
+            self.problem.ipc.exact_hessian(True)
+        return reason
 
     def _precheck(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
         """Before the line search: record lambda^2/2 and bound the step.
@@ -310,6 +354,8 @@ class Minimiser:
         """
         replaced = self.hessian.descent_direction(x, y, self.b)  # auto with CG
         self.stop.decrements.append(np.nan if self.saddle else 0.5 * abs(self.b.dot(y)))
+        if self.stop.stopping == "step":  # the full step, before any bound shortens it
+            self.stop.steps.append(y.norm(PETSc.NormType.INFINITY))
         scaled = bound_step(self.problem, x, y) < 1.0 or replaced
         if self.problem.filter_inversion:
             scaled = filter_inverting(self.problem, x, y) or scaled

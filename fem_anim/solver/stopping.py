@@ -7,9 +7,21 @@ iteration (``SNESSetConvergenceTest``):
   ||r|| <= ``snes_rtol`` r0 (r0 the norm at the initial guess);
 * ``"decrement"``: the Newton decrement lambda^2/2 = r^T H^-1 r / 2 <= ``decrement_tol``
   (seed definition 4; affine invariant, in the units of g), read from the Newton direction
-  before its line search.
+  before its line search;
+* ``"step"``: IPC's test (Li et al. 2020, section 4.1): the full Newton step p (before its
+  line search and contact bound) is small against the scene, ||p||_inf / h <= ``step_tol``
+  l with l the bounding-box diagonal of the rest mesh (:func:`scene_diagonal`), so a scene
+  at rest stops as soon as Newton moves it less than a fraction of its size per second.
+  A small step alone does not make the step's equations hold, so the test also asks that
+  the residual be small against the step's own forces: ||r|| <= :data:`FORCE_TOL` x the
+  largest of the 2-norms of the terms of grad g (inertia and the momenta it is the difference
+  of, damping, w grad E's elastic and obstacle part, w times gravity, w times the IPC barrier
+  and friction; over the free dofs:
+  :meth:`fem_anim.problem.objective.EnergyProblem.force_scale`), evaluated only once the
+  step is small. ``"auto"`` (the default) is ``"step"`` for a scene with contact
+  (obstacles or ``[contact]``) and ``"norm"`` for any other (:func:`resolve_stopping`).
 
-Either test also stops at the *round-off floor*: an iteration that neither halves ||r||
+Each test also stops at the *round-off floor*: an iteration that neither halves ||r||
 nor changes g by more than its floating-point resolution (:func:`resolution`) has nothing
 left to gain and stops with :data:`ROUNDOFF_REASON`, as does a line search that fails
 because the predicted decrease is below that resolution (:func:`at_objective_roundoff`).
@@ -29,15 +41,17 @@ The functions taking ``m`` act on a :class:`fem_anim.solver.minimiser.Minimiser`
 from __future__ import annotations
 
 import numpy as np
+from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim.errors import ConvergenceError
 from fem_anim.solver.step_bounds import step_limit
 
-__all__ = ["BUDGET_REASON", "CONVERGED_REASONS", "DECREMENT_REASON", "POLISH_FAILED_REASON",
-           "ROUNDOFF_REASON", "ROUNDOFF_ULPS", "SADDLE_FLOOR", "StoppingTest",
-           "accept_at_budget", "at_objective_roundoff", "finish_at_roundoff", "polish",
-           "reason_name", "resolution"]
+__all__ = ["BUDGET_REASON", "CONVERGED_REASONS", "DECREMENT_REASON", "FORCE_TOL",
+           "POLISH_FAILED_REASON", "ROUNDOFF_REASON", "ROUNDOFF_ULPS", "SADDLE_FLOOR",
+           "STEP_REASON", "StoppingTest", "accept_at_budget", "at_objective_roundoff",
+           "finish_at_roundoff", "polish", "reason_name", "resolution", "resolve_stopping",
+           "scene_diagonal"]
 
 #: Reason the convergence test gives when Newton stopped at the round-off floor of the
 #: objective: PETSc's CONVERGED_SNORM_RELATIVE, which PETSc itself never reports here
@@ -48,6 +62,12 @@ ROUNDOFF_ULPS = 4096.0
 #: Reason recorded when the Newton-decrement test stopped the iteration: PETSc's
 #: CONVERGED_ITS ("converged by a user test"; a plain iteration cap is DIVERGED_MAX_IT).
 DECREMENT_REASON = 5
+#: Reason recorded when IPC's step test (with its force check) stopped the iteration: the
+#: same "converged by a user test" as the decrement's (the scene's ``solver.stopping`` says
+#: which test it was).
+STEP_REASON = DECREMENT_REASON
+#: ``"step"``: the residual norm at most this fraction of the largest force term's norm.
+FORCE_TOL = 1e-6
 #: A saddle point's Newton is at its round-off floor when an iteration no longer halves
 #: ||r|| although ||r|| is already this far below its first value.
 SADDLE_FLOOR = 1e-6
@@ -69,6 +89,46 @@ def resolution(*values: float) -> float:
     return ROUNDOFF_ULPS * np.finfo(float).eps * max(abs(v) for v in values)
 
 
+def resolve_stopping(stopping: str, contact: bool, saddle: bool, newton: bool = True) -> str:
+    """The test ``solver.stopping`` names: ``"auto"`` is ``"step"`` with contact (a barrier's
+    residual spans too many orders for a test relative to r0), ``"norm"`` otherwise, for a
+    saddle point (its decrement and force check bound nothing) and for a method other than
+    Newton with line search (no full Newton step to measure).
+
+    Args:
+        stopping: ``solver.stopping``.
+        contact: Whether the scene has contact (obstacles or ``[contact]``).
+        saddle: Whether the step is a saddle point.
+        newton: Whether ``solver.method`` is ``"newton"`` with its split constant terms
+            (an implicit displacement step: the force check's terms exist).
+
+    Raises:
+        ValueError: ``"step"`` named for a saddle point or another method.
+    """
+    if stopping == "auto":
+        return "step" if contact and not saddle and newton else "norm"
+    if stopping == "step" and (saddle or not newton):
+        raise ValueError("solver.stopping = \"step\" needs solver.method = \"newton\" on an "
+                         "implicit displacement step (not element.formulation = \"mixed\" "
+                         "nor an explicit integrator): use \"norm\"")
+    return stopping
+
+
+def scene_diagonal(comm, points: np.ndarray) -> float:
+    """The length of the diagonal of the bounding box of ``points`` over all ranks (m).
+
+    Args:
+        comm: The mesh's communicator.
+        points: This rank's (n, gdim) rest coordinates (n may be 0).
+    """
+    n = points.shape[1]
+    local = np.concatenate([points.min(axis=0), -points.max(axis=0)]) if points.size \
+        else np.full(2 * n, np.inf)
+    bounds = np.empty_like(local)
+    comm.Allreduce(np.ascontiguousarray(local, dtype=float), bounds, op=MPI.MIN)
+    return float(np.linalg.norm(-bounds[n:] - bounds[:n]))
+
+
 def reason_name(enum, value: int) -> str:
     """``"NAME (value)"`` of a PETSc reason enumeration's member, or the bare value."""
     for name in dir(enum):
@@ -81,7 +141,8 @@ class StoppingTest:
     """The convergence test of one minimiser, with the step's residual and decrement history.
 
     Args:
-        stopping: ``solver.stopping``: ``"norm"`` or ``"decrement"``.
+        stopping: ``solver.stopping`` resolved (:func:`resolve_stopping`): ``"norm"``,
+            ``"decrement"`` or ``"step"``.
         decrement_tol: ``solver.decrement_tol`` (J), for ``"decrement"``.
         saddle: Whether the problem is a saddle point (no objective to judge by).
 
@@ -92,6 +153,12 @@ class StoppingTest:
         restarting: Set by the minimiser before an SNES solve that continues the step.
         polish_its: Full Newton steps of the last polish.
         polish_assemblies: ... of those, the ones that assembled a Hessian.
+        step_scale: ``"step"``: the largest ||p||_inf (m) of a converged step, step_tol x
+            diagonal x h, set by the minimiser for each step.
+        steps: ||p||_inf of each full Newton direction of the step.
+        forces: ``"step"``: a callable giving the largest force term's norm at an iterate
+            x (the minimiser's), called once a step is small.
+        force_checks: How often the step called ``forces``.
     """
 
     def __init__(self, stopping: str = "norm", decrement_tol: float = 0.0,
@@ -104,10 +171,16 @@ class StoppingTest:
         self.restarting = False
         self.polish_its = 0
         self.polish_assemblies = 0
+        self.step_scale = 0.0
+        self.steps: list[float] = []
+        self.forces = None
+        self.force_checks = 0
 
     def start(self) -> None:
-        """A new step: no decrements, no polish, not restarting."""
+        """A new step: no decrements, no step norms, no polish, not restarting."""
         self.decrements = []
+        self.steps = []
+        self.force_checks = 0
         self.polish_its = self.polish_assemblies = 0
         self.restarting = False
 
@@ -121,13 +194,19 @@ class StoppingTest:
         """lambda^2/2 of the step's last Newton direction (NaN without one)."""
         return self.decrements[-1] if self.decrements else float("nan")
 
+    def forces_balanced(self, fnorm: float, x: PETSc.Vec) -> bool:
+        """``"step"``'s force check at the iterate x with residual norm ``fnorm``:
+        ||r|| <= :data:`FORCE_TOL` x the largest force term's norm (collective)."""
+        self.force_checks += 1
+        return fnorm <= FORCE_TOL * self.forces(x)
+
     def target(self, snes: PETSc.SNES) -> float:
         """The residual norm the norm test asks for: max(snes_atol, snes_rtol r0)."""
         rtol, atol, _, _ = snes.getTolerances()
         return max(atol, rtol * self.history[0][0]) if self.history else atol
 
     def test(self, it: int, fnorm: float, g: float,
-             tolerances: tuple[float, float, float, int]) -> int:
+             tolerances: tuple[float, float, float, int], x: PETSc.Vec | None = None) -> int:
         """The SNES reason after iteration ``it``: the chosen test, or the round-off floor.
 
         Args:
@@ -135,6 +214,7 @@ class StoppingTest:
             fnorm: ||r|| at the iterate.
             g: The objective there (NaN for a saddle point).
             tolerances: ``snes.getTolerances()``: (rtol, atol, stol, max_it).
+            x: The iterate (``"step"``'s force check reads it).
 
         Returns:
             A ``PETSc.SNES.ConvergedReason``, :data:`DECREMENT_REASON` or
@@ -155,6 +235,12 @@ class StoppingTest:
             # lambda^2/2 of the previous Newton direction (the step from it is taken)
             if it > 0 and self.decrements and self.decrements[-1] <= self.decrement_tol:
                 return DECREMENT_REASON
+        elif self.stopping == "step":
+            # the previous full Newton step was small, and the residual is small against
+            # the step's forces at the iterate it led to
+            if it > 0 and self.steps and self.steps[-1] <= self.step_scale and \
+                    self.forces_balanced(fnorm, x):
+                return STEP_REASON
         elif fnorm <= atol:
             return R.CONVERGED_FNORM_ABS
         elif fnorm <= rtol * self.history[0][0]:
@@ -201,9 +287,9 @@ def polish(m, x: PETSc.Vec, max_steps: int = 5, assemble: bool = True) -> tuple[
     Below the objective's round-off the line search cannot tell a good step from a bad one,
     but the residual still can: take full steps (x updated in place) while each at least
     halves ||r|| and keeps clear of contact (:func:`fem_anim.solver.step_bounds.step_limit`),
-    then apply the chosen test (norms: ``snes_atol``, ``snes_rtol``; or the decrement of
-    the next Newton direction). The steps are counted in ``m.stop.polish_its`` (and
-    ``polish_assemblies``).
+    then apply the chosen test (norms: ``snes_atol``, ``snes_rtol``; the decrement of
+    the next Newton direction; or that direction's size with the force check). The steps
+    are counted in ``m.stop.polish_its`` (and ``polish_assemblies``).
 
     Args:
         m: The minimiser.
@@ -215,8 +301,8 @@ def polish(m, x: PETSc.Vec, max_steps: int = 5, assemble: bool = True) -> tuple[
 
     Returns:
         The SNES reason to report (CONVERGED_FNORM_ABS / _RELATIVE, :data:`DECREMENT_REASON`,
-        or :data:`POLISH_FAILED_REASON` if the test is still not met: x is kept, as
-        converged as double precision allows) and the final residual norm.
+        :data:`STEP_REASON`, or :data:`POLISH_FAILED_REASON` if the test is still not met:
+        x is kept, as converged as double precision allows) and the final residual norm.
     """
     stop = m.stop
     _, atol, _, _ = m.snes.getTolerances()
@@ -236,6 +322,10 @@ def polish(m, x: PETSc.Vec, max_steps: int = 5, assemble: bool = True) -> tuple[
             stop.decrements.append(np.nan if stop.saddle else decrement)
             if stop.stopping == "decrement" and decrement <= stop.decrement_tol:
                 return DECREMENT_REASON, norm
+            if stop.stopping == "step" and \
+                    step.norm(PETSc.NormType.INFINITY) <= stop.step_scale:
+                if stop.forces_balanced(norm, x):
+                    return STEP_REASON, norm
             if step_limit(m.problem, x, step) < 1.0:
                 break  # a full step must keep clear of obstacles and other surfaces
             x.copy(trial)

@@ -716,6 +716,56 @@ MUTATIONS: list[Mutation] = [
              "except (MemoryError, RuntimeError) as err:", "except ArithmeticError as err:",
              ("tests/test_contact_ends.py::test_library_error_is_one_line_and_exit_2",),
              "a MemoryError or RuntimeError of ipctk/PETSc reaches the user as a traceback"),
+    # -- contact at animation pace: safe integrator, kappa that stays put, recorded steps --
+    Mutation("contact-default-integrator", "fem_anim/scene/contact_integrator.py",
+             'CONTACT_INTEGRATOR = "implicit_euler"', 'CONTACT_INTEGRATOR = "newmark"',
+             ("tests/test_contact_pace.py::test_contact_scene_defaults_to_implicit_euler_and_"
+              "refuses_newmark",),
+             "a contact scene defaults to newmark again"),
+    Mutation("contact-newmark-allowed", "fem_anim/scene/contact_integrator.py",
+             'CONTACT_INTEGRATORS = ("implicit_euler", "bdf2")',
+             'CONTACT_INTEGRATORS = ("implicit_euler", "bdf2", "newmark")',
+             ("tests/test_contact_pace.py::test_contact_scene_defaults_to_implicit_euler_and_"
+              "refuses_newmark",),
+             "newmark accepted in a contact scene"),
+    Mutation("kappa-rebalanced-each-step", "fem_anim/contact/ipc.py",
+             "value = self.kappa_floor if self.balanced else max(kappa, self.kappa_floor)",
+             "value = kappa",
+             ("tests/test_contact_pace.py::test_stats_record_the_barrier_and_kappa_stays_put_"
+              "at_rest",),
+             "kappa re-balanced at every step start (changes while nothing changes)"),
+    Mutation("stats-min-distance-unrecorded", "fem_anim/contact/ipc.py",
+             '"min_distance": self.comm.bcast(d, root=0)', '"min_distance": self.dhat',
+             ("tests/test_contact_pace.py::test_stats_record_the_barrier_and_kappa_stays_put_"
+              "at_rest",),
+             "stats.csv records d-hat as the smallest distance"),
+    Mutation("energy-line-handles-as-percent", "fem_anim/simulation/energy_report.py",
+             'if report.get("moving_pins"):', 'if False:',
+             ("tests/test_contact_pace.py::test_energy_line_separates_handle_work_and_is_calm_"
+              "for_dissipation",),
+             "a handle-driven scene gets a drift percentage again"),
+    # -- Newton that settles: IPC's step test with its force check, exact Hessian near rest --
+    Mutation("step-test-without-force-check", "fem_anim/solver/stopping.py",
+             "                    self.forces_balanced(fnorm, x):", "                    True:",
+             ("tests/test_contact_pace.py::test_each_step_satisfies_its_equations_from_the_"
+              "written_outputs",),
+             "IPC's step test alone ends a step (its equations no longer hold to 1e-6)"),
+    Mutation("force-check-loose", "fem_anim/solver/stopping.py",
+             "FORCE_TOL = 1e-6", "FORCE_TOL = 1e-3",
+             ("tests/test_contact_pace.py::test_each_step_satisfies_its_equations_from_the_"
+              "written_outputs",),
+             "the force check asks 1e-3 of the largest force term instead of 1e-6"),
+    Mutation("barrier-hessian-always-projected", "fem_anim/solver/minimiser.py",
+             "self.problem.ipc.exact_hessian(True)", "self.problem.ipc.exact_hessian(False)",
+             ("tests/test_contact_pace.py::test_bodies_at_rest_take_at_most_two_newton_"
+              "iterations",),
+             "the barrier's Hessian stays PSD-projected near rest (linear convergence)"),
+    Mutation("contact-stopping-auto-is-norm", "fem_anim/solver/stopping.py",
+             'return "step" if contact and not saddle and newton else "norm"',
+             'return "norm"',
+             ("tests/test_contact_pace.py::test_bodies_at_rest_take_at_most_two_newton_"
+              "iterations",),
+             "a contact scene keeps the residual-norm test relative to r0"),
 ]
 
 def copy_tree(dest: Path) -> None:

@@ -1,0 +1,262 @@
+"""Contact at animation pace: an integrator that cannot gain energy by default, a barrier
+stiffness that stays put while nothing changes, the contact numbers of each step recorded,
+and an energy line that separates the handles' work from the stored energy."""
+
+from __future__ import annotations
+
+import csv
+import gc
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fem_anim.errors import SceneError
+from fem_anim.scene import load_scene
+from fem_anim.scene.loading import Scene
+
+#: A coarse ball thrown against a wall obstacle, no gravity (docs/contact_scenes/ball_wall.toml
+#: coarsened): the barrier takes the whole kinetic energy and gives it back.
+BALL_WALL = """
+name = "ball_wall"
+[mesh]
+shape = "sphere"
+radius = 0.05
+element_size = 0.05
+[material]
+youngs_modulus = 5.0e4
+poisson_ratio = 0.4
+density = 1000.0
+[time]
+dt = 0.01
+steps = 14
+[initial]
+velocity = [2.0, 0.0, 0.0]
+[[obstacle]]
+name = "wall"
+type = "plane"
+point = [0.08, 0.0, 0.0]
+normal = [-1.0, 0.0, 0.0]
+dhat = 0.002
+stiffness = 5.0e4
+"""
+
+#: Two coarse cubes, the upper one dropped on the lower one, which lies on the ground.
+STACK = """
+name = "stack"
+[time]
+dt = 0.01
+steps = {steps}
+[gravity]
+acceleration = [0.0, 0.0, -9.81]
+[contact]
+dhat = 0.004
+friction = 0.3
+epsv = 0.01
+[[obstacle]]
+name = "ground"
+type = "plane"
+normal = [0.0, 0.0, 1.0]
+dhat = 0.004
+stiffness = 1.0e5
+[[body]]
+name = "lower"
+offset = [0.0, 0.0, 0.005]
+mesh = {{ shape = "box", size = [0.1, 0.1, 0.05], element_size = 0.05 }}
+material = {{ youngs_modulus = 1e5, density = 1000 }}
+[[body]]
+name = "upper"
+offset = [0.0, 0.0, 0.065]
+mesh = {{ shape = "box", size = [0.1, 0.1, 0.05], element_size = 0.05 }}
+material = {{ youngs_modulus = 1e5, density = 1000 }}
+"""
+
+
+@pytest.fixture(autouse=True)
+def _collect():
+    yield
+    gc.collect()
+    MPI.COMM_WORLD.Barrier()
+
+
+def run(tmp_path, text: str, *overrides: str) -> tuple[list[dict], dict, str]:
+    """Run a scene by the command line: its stats rows, summary and printed lines."""
+    from fem_anim.cli import main
+
+    path = tmp_path / "scene.toml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    args = ["run", str(path), "-o", str(out)]
+    for item in overrides:
+        args += ["--set", item]
+    assert main(args) == 0
+    rows = list(csv.DictReader(open(out / "stats.csv")))
+    return rows, json.loads((out / "summary.json").read_text()), str(out)
+
+
+# -- 1. safe by default ----------------------------------------------------------------------
+def test_contact_scene_defaults_to_implicit_euler_and_refuses_newmark():
+    scene = Scene.from_toml(BALL_WALL)
+    assert scene["time"]["integrator"] == "implicit_euler"
+    assert Scene.from_toml(BALL_WALL, ['time.integrator="bdf2"'])["time"]["integrator"] == "bdf2"
+    for name in ("newmark", "symplectic_euler"):
+        with pytest.raises(SceneError) as err:
+            Scene.from_toml(BALL_WALL, [f'time.integrator="{name}"'])
+        message = str(err.value)
+        assert "\n" not in message and f'time.integrator = "{name}" is refused' in message
+        assert 'set time.integrator = "implicit_euler"' in message
+    # without contact the global default (newmark) is kept
+    assert load_scene(None, [])["time"]["integrator"] == "newmark"
+    plain = Scene.from_toml(BALL_WALL.split("[[obstacle]]")[0])
+    assert plain["time"]["integrator"] == "newmark"
+
+
+@pytest.mark.parametrize("integrator", ["implicit_euler", "bdf2"])
+def test_no_allowed_integrator_gains_energy_at_an_impact(tmp_path, integrator):
+    """The ball hits the wall and leaves it: the total energy never rises above its start
+    by more than 1 % of the energy exchanged."""
+    rows, summary, _ = run(tmp_path, BALL_WALL, f'time.integrator="{integrator}"')
+    e = summary["energy"]
+    total = np.array([float(r["total_energy"]) for r in rows])
+    assert float(rows[-1]["kinetic"]) > 0.05 * e["exchanged_energy"]  # it bounced
+    assert np.max(total - e["initial_energy"]) <= 0.01 * e["exchanged_energy"]
+    assert e["max_rise"] <= 0.01
+
+
+# -- 2./3. kappa that stays put, recorded per step -------------------------------------------
+def test_stats_record_the_barrier_and_kappa_stays_put_at_rest(tmp_path):
+    rows, summary, out = run(tmp_path, STACK.format(steps=12))
+    for key in ("barrier_stiffness", "dhat", "contact_pairs", "min_distance", "friction_lags"):
+        assert all(r[key] != "" for r in rows), key
+    assert all(float(r["dhat"]) == 0.004 for r in rows)
+    assert all(int(r["friction_lags"]) == 1 for r in rows)  # friction: lagged once a step
+    touching = [r for r in rows if int(r["contact_pairs"]) > 0]
+    assert touching, "the upper cube never reached the lower one"
+    for r in touching:
+        assert 0.0 < float(r["min_distance"]) < 0.004
+    # once pairs exist, kappa moves only by IPC's update (the distance falling): the last
+    # steps, at rest, keep one barrier stiffness
+    kappas = [float(r["barrier_stiffness"]) for r in rows[-4:]]
+    assert kappas[0] > 0 and np.ptp(kappas) <= 1e-12 * kappas[0], kappas
+
+
+# -- 3. the energy line ----------------------------------------------------------------------
+def test_energy_line_separates_handle_work_and_is_calm_for_dissipation():
+    from fem_anim.simulation.energy_report import describe_energy, energy_report
+
+    scene = load_scene(None, ["pin.0.velocity=[0, 0, 0.1]", "damping.alpha=0",
+                              "damping.beta=0"])
+    initial = {"total_energy": 0.0, "elastic": 0.0, "gravity": 0.0, "roundoff": 1e-12}
+    rows = [{"step": 1, "kinetic": 0.5, "elastic": 39.0, "gravity": 0.0, "contact": 0.0,
+             "total_energy": 39.5}]
+    report = energy_report(rows, initial, scene)
+    line = describe_energy(report, scene)
+    assert "%" not in line and "handles" in line and "39.5 J" in line, line
+    assert "elastic 39 " in line and "kinetic 0.5" in line, line
+    pile = Scene.from_toml(STACK.format(steps=3))
+    initial = {"total_energy": 1.0, "elastic": 0.0, "gravity": 1.0, "roundoff": 1e-12}
+    rows = [{"step": 1, "kinetic": 0.0, "elastic": 0.0, "gravity": 0.002, "contact": 0.0,
+             "total_energy": 0.002}]
+    line = describe_energy(energy_report(rows, initial, pile), pile)
+    assert "as designed" in line and "GAINED" not in line and "damp" in line, line
+
+
+# -- 2. Newton that settles: IPC's step test, and each step's equations still hold ------------
+def _frame_dofs(sim, frame: np.ndarray) -> np.ndarray:
+    """A written frame (input vertex order) as local dof values of V (serial)."""
+    g = sim.gather
+    u = np.zeros(sim.problem.u.x.array.size)
+    u.reshape(-1, g.bs)[g.node_to_dof] = frame[g.input_index]
+    return u
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="re-reads the files on one rank")
+def test_each_step_satisfies_its_equations_from_the_written_outputs(tmp_path):
+    """Re-assemble implicit Euler's residual M (x - y) + h^2 (grad E + kappa grad B + grad D)
+    of every written step from the trajectory and stats.csv's kappa alone: at most 1e-6 of
+    its largest force term (inertia and the momenta h M v_{n+1}, h M v_n it is the
+    difference of, gravity, elastic and obstacle, IPC barrier and friction), with IPC's
+    step test stopping Newton."""
+    from dolfinx.fem import petsc as fem_petsc
+    from petsc4py import PETSc
+
+    from fem_anim.runs import open_run
+    from fem_anim.simulation.loop import Simulation
+
+    text = STACK.format(steps=10)
+    rows, _, out = run(tmp_path, text)
+    assert all(int(r["retries"]) == 0 and r["snes_reason"] == "5" for r in rows)
+    written = open_run(out)
+    sim = Simulation(Scene.from_toml(text))
+    p = sim.problem
+    M = fem_petsc.assemble_matrix(p.mass_form)
+    M.assemble()
+    vec = lambda a: PETSc.Vec().createWithArray(a.copy())  # noqa: E731
+    frames = [_frame_dofs(sim, written.displacement(k)) for k in range(len(written.times))]
+    assert len(frames) == len(rows) + 1
+    worst = 0.0
+    for n, row in enumerate(rows):
+        h = float(row["dt"])
+        u_n, x = frames[n], frames[n + 1]
+        v_n = (frames[n] - frames[n - 1]) / h if n else np.zeros_like(u_n)
+        y = u_n + h * v_n
+        w = h * h
+        p.stage(u_n, y, w, float(row["time"]), h)
+        p.u.x.array[:] = u_n
+        p.ipc.restage(float(row["barrier_stiffness"]), h)
+        assert float(row["dhat"]) == p.ipc.dhat
+        p.u.x.array[:] = x
+        p.update_quadrature_data()
+        inertia = vec(x - y)
+        M.mult(vec(x - y), inertia)
+        gravity = p.constant_terms.gradient.copy()
+        gravity.scale(w)
+        potential = fem_petsc.assemble_vector(p.potential_gradient_form)
+        potential.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        potential.scale(w)
+        elastic = potential.copy()
+        elastic.axpy(-1.0, gravity)  # elastic and the ground's barrier and friction
+        barrier = vec(np.zeros_like(x))
+        p.ipc.add_gradient(barrier, w)
+        terms = [inertia, gravity, elastic, barrier]
+        r = sum(t.array for t in terms)
+        momenta = [M.createVecLeft() for _ in range(2)]  # h M v_{n+1}, h M v_n
+        M.mult(vec(x - u_n), momenta[0])
+        M.mult(vec(y - u_n), momenta[1])
+        largest = max(t.norm() for t in terms + momenta)
+        worst = max(worst, np.linalg.norm(r) / largest)
+        assert np.linalg.norm(r) <= 1e-6 * largest, (n + 1, np.linalg.norm(r) / largest)
+        for t in terms + momenta + [potential]:
+            t.destroy()
+    assert worst > 0.0
+    M.destroy()
+
+
+def test_bodies_at_rest_take_at_most_two_newton_iterations(tmp_path):
+    """Two cubes at rest on the ground (docs/contact_scenes/stacked_cubes.toml: the upper one
+    has landed by step 15): at most 2 Newton iterations a step, every step stopped by IPC's
+    test, none at the round-off floor."""
+    scene = Path(__file__).parents[1] / "docs" / "contact_scenes" / "stacked_cubes.toml"
+    rows, _, _ = run(tmp_path, scene.read_text(), "time.steps=24")
+    assert all(r["snes_reason"] == "5" for r in rows), [r["snes_reason"] for r in rows]
+    assert max(int(r["newton_its"]) for r in rows[-8:]) <= 2, \
+        [int(r["newton_its"]) for r in rows]
+
+
+def test_auto_stopping_is_ipc_step_test_only_for_newton_with_contact():
+    """``"auto"``: IPC's step test for a Newton step with contact; the norm test for a scene
+    without contact, a saddle point, or a method without a full Newton step to measure;
+    ``"step"`` named where it cannot apply is one error."""
+    from fem_anim.solver.stopping import resolve_stopping
+
+    assert resolve_stopping("auto", True, False, True) == "step"
+    assert resolve_stopping("auto", False, False, True) == "norm"
+    assert resolve_stopping("auto", True, True, True) == "norm"
+    assert resolve_stopping("auto", True, False, False) == "norm"
+    assert resolve_stopping("decrement", True, False, True) == "decrement"
+    assert resolve_stopping("step", False, False, True) == "step"
+    for saddle, newton in ((True, True), (False, False)):
+        with pytest.raises(ValueError, match='solver.stopping = "step" needs'):
+            resolve_stopping("step", True, saddle, newton)
