@@ -295,10 +295,11 @@ class Simulation:
         """Time in ipctk (detection, barrier, CCD; summed since the last row) and, with
         ``[contact]``, the step's barrier stiffness, d-hat, pairs, smallest distance and
         friction lags at its end (:meth:`fem_anim.contact.ipc.IPCContact.step_stats`;
-        0 pairs without ``[contact]``)."""
+        without ``[contact]``: 0 pairs, and NaN for the quantities that do not apply)."""
         ipc = self.problem.ipc
         if ipc is None:
-            return {"contact_s": 0.0, "contact_pairs": 0}
+            return {"contact_s": 0.0, "contact_pairs": 0, **dict.fromkeys(
+                ("barrier_stiffness", "dhat", "min_distance", "friction_lags"), math.nan)}
         spent = sum(ipc.timers.values())
         for key in ipc.timers:
             ipc.timers[key] = 0.0
