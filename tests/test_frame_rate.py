@@ -84,3 +84,43 @@ def test_pictures_play_at_the_frame_rate(tmp_path):
 
     with fem_anim.run(_scene(output__fps=30), tmp_path / "out") as run:
         assert _frame_rate({"fps": None}, run.times) == pytest.approx(30.0, rel=1e-12)
+
+
+def test_interrupted_and_resumed_run_is_the_uninterrupted_one(tmp_path):
+    """Frames at 1/24 s from 1/120 s steps (dt = 0.01 s): a run stopped by SIGINT after a
+    few frames and resumed writes the same frames and stats as one run straight through.
+
+    (Needs the checkpoint's validation to use the frame clock: frame k at k/fps.)"""
+    import signal
+    import subprocess
+    import time
+
+    from conftest import clean_environment, fem_anim_command
+
+    args = ["run", "-q", "--set", "mesh.element_size=0.1", "--set", "time.dt=0.01",
+            "--set", "time.steps=40", "--set", "output.fps=24",
+            "--set", "output.checkpoint_every=2", "--set", "output.render=false"]
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    r = subprocess.run(fem_anim_command() + args + ["-o", str(whole)], capture_output=True,
+                       text=True, env=clean_environment(), cwd=tmp_path, timeout=600)
+    assert r.returncode == 0, r.stderr
+    proc = subprocess.Popen(fem_anim_command() + args + ["-o", str(cut)], cwd=tmp_path,
+                            env=clean_environment(), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    partial = cut / ".partial" / "stats.csv"
+    deadline = time.time() + 300
+    while time.time() < deadline and proc.poll() is None:
+        if partial.exists() and len(partial.read_text().splitlines()) > 12:
+            proc.send_signal(signal.SIGINT)
+            break
+        time.sleep(0.005)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130 and "interrupted by SIGINT at frame" in err, err
+    r = subprocess.run(fem_anim_command() + args + ["--resume", str(cut)], capture_output=True,
+                       text=True, env=clean_environment(), cwd=tmp_path, timeout=600)
+    assert r.returncode == 0, r.stderr
+    a, b = fem_anim.open_run(whole), fem_anim.open_run(cut)
+    assert np.array_equal(a.times, np.arange(11) / 24.0) and np.array_equal(a.times, b.times)
+    assert [r["time"] for r in a.stats] == [r["time"] for r in b.stats]
+    for k in range(len(a.times)):
+        np.testing.assert_allclose(b.displacement(k), a.displacement(k), rtol=0, atol=1e-12)

@@ -93,9 +93,13 @@ def repair_surface_to_tets(points: np.ndarray, triangles: np.ndarray, element_si
                  edge_length=element_size)
         env = {k: v for k, v in os.environ.items()
                if not k.startswith(("OMPI_", "PMIX_", "PMI_"))}  # not part of the MPI job
-        try:
+        env["PYTHONPATH"] = os.pathsep.join(
+            [str(Path(__file__).resolve().parents[2])] + env.get("PYTHONPATH", "").split(
+                os.pathsep)).rstrip(os.pathsep)
+        try:  # in the temporary folder: fTetWild writes a file into its working directory
             child = subprocess.run([sys.executable, "-m", __name__, str(given), str(made)],
-                                   capture_output=True, text=True, env=env, timeout=TIMEOUT)
+                                   capture_output=True, text=True, env=env, cwd=folder,
+                                   timeout=TIMEOUT)
         except subprocess.TimeoutExpired:
             raise MeshError(f"{source}: fTetWild did not finish within {TIMEOUT:.0f} s (is "
                             "mesh.element_size too small?)") from None
