@@ -10,14 +10,21 @@ cannot be meshed (degenerate and duplicate triangles: fTetWild ends the process 
 refuses a soup that encloses nothing, and runs fTetWild in a child process, so that a crash
 inside it becomes one :class:`~fem_anim.errors.MeshError` rather than the end of the run.
 The tetrahedra come back positively oriented (their volume, seed section 3: J > 0 at rest).
+
+fTetWild is not deterministic (the same surface gives other tetrahedra from run to run, also
+on one thread: wildmeshing/fTetWild issue 72), so each result is kept in a cache folder
+(:func:`cache_folder`) under the hash of fTetWild's input: a scene run again, or resumed
+from its checkpoint, gets the same tetrahedra.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import subprocess
 import sys
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +32,7 @@ import numpy as np
 from fem_anim.errors import MeshError
 from fem_anim.mesh.checks import FLAT
 
-__all__ = ["clean_triangles", "repair_surface_to_tets", "ENVELOPE"]
+__all__ = ["clean_triangles", "repair_surface_to_tets", "cache_folder", "ENVELOPE"]
 
 #: fTetWild's envelope: the output surface lies within this fraction of the bounding box
 #: diagonal of the input (fTetWild's default, 1e-3).
@@ -69,6 +76,28 @@ def clean_triangles(points: np.ndarray, triangles: np.ndarray, source: str) -> n
     return kept
 
 
+def cache_folder() -> Path:
+    """Where fTetWild's results are kept: ``$FEM_ANIM_CACHE``, else
+    ``$XDG_CACHE_HOME/fem_anim``, else ``~/.cache/fem_anim`` (fem_anim's own folder: its
+    files may be deleted at any time, they are made again)."""
+    if os.environ.get("FEM_ANIM_CACHE"):
+        return Path(os.environ["FEM_ANIM_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "fem_anim"
+
+
+def _cache_file(points: np.ndarray, triangles: np.ndarray, element_size: float) -> Path:
+    """The cache file of one fTetWild input (points, triangles, edge, envelope, version)."""
+    from importlib.metadata import version
+
+    digest = hashlib.sha256()
+    for part in (np.ascontiguousarray(points, np.float64), np.ascontiguousarray(triangles,
+                                                                                  np.int64)):
+        digest.update(part.tobytes())
+    digest.update(f"{element_size!r} {ENVELOPE!r} {version('pytetwild')}".encode())
+    return cache_folder() / f"tetwild-{digest.hexdigest()[:32]}.npz"
+
+
 def repair_surface_to_tets(points: np.ndarray, triangles: np.ndarray, element_size: float,
                            source: str) -> tuple[np.ndarray, np.ndarray]:
     """Tetrahedralise the solid a triangle soup encloses with fTetWild (rank 0).
@@ -87,6 +116,44 @@ def repair_surface_to_tets(points: np.ndarray, triangles: np.ndarray, element_si
             or crashes, or it finds no volume inside the surface.
     """
     kept = clean_triangles(points, triangles, source)
+    cached = _cache_file(points, kept, element_size)
+    try:
+        with np.load(cached) as data:
+            return _oriented(data["points"], data["tets"].astype(np.int64), source)
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):  # mesh again
+        pass
+    tet_points, tets = _run_tetwild(points, kept, element_size, source)
+    try:  # a temporary name, renamed: a cache file is complete or absent
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".tetwild-", suffix=".npz", dir=cached.parent)
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, points=tet_points, tets=tets)
+        os.replace(tmp, cached)
+    except OSError:  # a read-only home: the run goes on without the cache
+        pass
+    return _oriented(tet_points, tets, source)
+
+
+def _oriented(tet_points: np.ndarray, tets: np.ndarray, source: str
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The tetrahedra with every one positively oriented (a swap of two vertices).
+
+    Raises:
+        MeshError: for no tetrahedra (nothing inside the surface).
+    """
+    if len(tets) == 0:
+        raise MeshError(f"{source}: fTetWild found no volume inside the surface (is it a "
+                        "sheet, or is mesh.element_size larger than the body?)")
+    a, b, c, d = (tet_points[tets[:, k]] for k in range(4))
+    negative = np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) < 0.0
+    tets = tets.copy()
+    tets[negative] = tets[negative][:, [0, 2, 1, 3]]
+    return tet_points, tets
+
+
+def _run_tetwild(points: np.ndarray, kept: np.ndarray, element_size: float, source: str
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """fTetWild in a child process (rank 0); its crash or failure is a MeshError."""
     with tempfile.TemporaryDirectory(prefix="fem_anim_tetwild_") as folder:
         given, made = Path(folder) / "surface.npz", Path(folder) / "tets.npz"
         np.savez(given, points=points, triangles=kept.astype(np.int32),
@@ -107,14 +174,7 @@ def repair_surface_to_tets(points: np.ndarray, triangles: np.ndarray, element_si
             detail = " ".join(child.stderr.split()[-30:]) or f"exit code {child.returncode}"
             raise MeshError(f"{source}: fTetWild failed to fill the surface ({detail})")
         with np.load(made) as data:
-            tet_points, tets = data["points"], data["tets"].astype(np.int64)
-    if len(tets) == 0:
-        raise MeshError(f"{source}: fTetWild found no volume inside the surface (is it a "
-                        "sheet, or is mesh.element_size larger than the body?)")
-    a, b, c, d = (tet_points[tets[:, k]] for k in range(4))
-    negative = np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) < 0.0
-    tets[negative] = tets[negative][:, [0, 2, 1, 3]]
-    return tet_points, tets
+            return data["points"], data["tets"].astype(np.int64)
 
 
 def _main(given: str, made: str) -> None:
