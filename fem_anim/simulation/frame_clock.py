@@ -2,7 +2,7 @@
 
 A run writes frame k at exactly t_k = k / ``output.fps`` (k = 0, 1, ..., K), whatever
 ``time.dt`` is: each frame interval 1/fps is split into the fewest equal substeps no longer
-than ``time.dt``,
+than ``time.dt``::
 
     n = ceil((1/fps) / dt),    h = (1/fps) / n <= dt,
 

@@ -65,7 +65,8 @@ def main() -> None:
     import tetgen
 
     edge = 0.03
-    print("| surface | mesher | time (s) | tetrahedra | volume / closed | worst, mean radius ratio |")
+    print("| surface | mesher | time (s) | tetrahedra | volume / closed "
+          "| worst, mean radius ratio |")
     print("|---|---|---|---|---|---|")
     for name, v, f, reference in surfaces():
         v, f = np.asarray(v, float), np.asarray(f, np.int32)
