@@ -32,8 +32,9 @@ def _scene(**changes):
 
 @pytest.mark.parametrize("dt, steps, fps, substeps, count", [
     (1 / 60, 60, 24, 3, 24),   # the default dt: 1/24 s in 3 steps of 1/72 s
-    (1 / 60, 60, 30, 2, 30),   # 1/30 s / (1/60 s) is 2 up to round-off, not 3
-    (0.01, 100, 25, 4, 25),    # 0.04 / 0.01 and 100 * 0.01 * 25 are whole up to round-off
+    (1 / 60, 60, 30, 2, 30),   # the default dt divides 1/30 s: the steps of dt
+    (0.01, 100, 25, 4, 25),    # 0.04 s in 4 steps of dt
+    (0.1, 3, 30, 1, 9),        # 3 * 0.1 * 30 is 9.000000000000002 in floating point: 9
     (0.01, 10, 24, 5, 3),      # 0.1 s is 2.4 frames: up to the next whole frame
     (0.1, 3, 24, 1, 8),        # dt longer than a frame: one step per frame
     (0.001, 3, 24, 42, 1),     # shorter than a frame: one frame
