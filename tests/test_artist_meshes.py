@@ -144,13 +144,23 @@ def test_fill_modes():
 
 
 def test_units_and_scale(tmp_path):
-    """Coordinates in cm are metres / 100; ``mesh.scale`` multiplies them after the unit."""
-    cfg = {"shape": "file", "file": "sphere_closed.obj", "dim": 3, "element_size": 0.04}
-    metres = mesh_arrays(cfg, DATA)
-    cm = mesh_arrays(cfg | {"units": "cm", "element_size": 0.0004}, DATA)
-    np.testing.assert_allclose(cm[0], metres[0] / 100, rtol=1e-12, atol=1e-15)
-    doubled = mesh_arrays(cfg | {"units": "mm", "scale": 2000.0, "element_size": 0.08}, DATA)
-    np.testing.assert_allclose(doubled[0], 2 * metres[0], rtol=1e-12)
+    """Coordinates in cm are metres / 100; ``mesh.scale`` multiplies them after the unit;
+    a surface is scaled before it is filled (``element_size`` is in metres)."""
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
+    tets = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    meshio.write(tmp_path / "tets.vtu", meshio.Mesh(points * 100, [("tetra", tets)]))
+    cfg = {"shape": "file", "file": "tets.vtu", "dim": 3, "element_size": 0.5}
+    cm = mesh_arrays(cfg | {"units": "cm"}, tmp_path)
+    np.testing.assert_allclose(cm[0], points, rtol=1e-15)
+    scaled = mesh_arrays(cfg | {"units": "mm", "scale": 20.0}, tmp_path)
+    np.testing.assert_allclose(scaled[0], 2 * points, rtol=1e-15)
+    closed = meshio.read(DATA / "sphere_closed.obj")  # 0.1 m, written in km
+    meshio.write(tmp_path / "km.obj", meshio.Mesh(closed.points / 1000, closed.cells))
+    surface = {"shape": "file", "dim": 3, "element_size": 0.04}
+    km = mesh_arrays(surface | {"file": "km.obj", "units": "km"}, tmp_path)
+    metres = mesh_arrays(surface | {"file": "sphere_closed.obj"}, DATA)
+    assert len(km[1]) == len(metres[1])
+    np.testing.assert_allclose(km[0], metres[0], atol=1e-12)
     with pytest.raises(SceneError, match="mesh.units"):
         fem_anim.Scene.from_dict({"mesh": {"units": "inch"}})
 

@@ -13,6 +13,8 @@ wall time, the tetrahedra, the volume against the closed solid's, and the radius
 
 from __future__ import annotations
 
+import os
+import tempfile
 import time
 
 import numpy as np
@@ -64,6 +66,7 @@ def main() -> None:
     import pytetwild
     import tetgen
 
+    os.chdir(tempfile.mkdtemp(prefix="tetrahedraliser_"))  # fTetWild writes a file here
     edge = 0.03
     print("| surface | mesher | time (s) | tetrahedra | volume / closed "
           "| worst, mean radius ratio |")
