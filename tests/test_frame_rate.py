@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 
 import fem_anim
+from fem_anim.errors import SceneError
+from fem_anim.scene.constraints import MAX_STEPS
 from fem_anim.simulation.frame_clock import frame_clock
 
 #: A 2D cantilever of 8 triangles under gravity, dt = 0.01 s, which does not divide 1/24 s.
@@ -38,9 +40,16 @@ def _scene(**changes):
     (0.01, 10, 24, 5, 3),      # 0.1 s is 2.4 frames: up to the next whole frame
     (0.1, 3, 24, 1, 8),        # dt longer than a frame: one step per frame
     (0.001, 3, 24, 42, 1),     # shorter than a frame: one frame
+    (1e100, 2, 1e-100, 1, 2),  # one huge step per frame
+    (1e-9, 1, 1e-3, 10**12, 1),  # more than MAX_STEPS steps: refused
 ])
 def test_frame_clock(dt, steps, fps, substeps, count):
-    clock = frame_clock(_scene(time__dt=dt, time__steps=steps, output__fps=fps))
+    scene = _scene(time__dt=dt, time__steps=steps, output__fps=fps)
+    if substeps * count > MAX_STEPS:
+        with pytest.raises(SceneError, match="more than 1000000000 steps"):
+            frame_clock(scene)
+        return
+    clock = frame_clock(scene)
     assert (clock.substeps, clock.count) == (substeps, count)
     assert clock.step <= dt * (1 + 1e-12) and clock.step * substeps == pytest.approx(1 / fps)
     assert clock.end >= steps * dt * (1 - 1e-9) and clock.end - 1 / fps < steps * dt

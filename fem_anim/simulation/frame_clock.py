@@ -19,6 +19,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from fem_anim.errors import SceneError
+from fem_anim.scene.constraints import MAX_STEPS
+
 __all__ = ["FrameClock", "frame_clock"]
 
 #: A product (steps * dt * fps, or an interval over dt) this close to an integer is that
@@ -83,6 +86,10 @@ def frame_clock(scene) -> FrameClock:
         The :class:`FrameClock`: frames at k/fps up to the first frame time at or after
         ``steps * dt``, reached by substeps of (1/fps)/ceil((1/fps)/dt).
 
+    Raises:
+        SceneError: if the run would take more than
+            :data:`~fem_anim.scene.constraints.MAX_STEPS` steps.
+
     Examples:
         >>> clock = FrameClock(24.0, 1, _ceil((1 / 24) / (1 / 60)), _ceil(60 * (1 / 60) * 24))
         >>> clock.substeps, clock.count, round(clock.step * 72, 12), clock.number(0)
@@ -90,4 +97,9 @@ def frame_clock(scene) -> FrameClock:
     """
     dt, steps = scene["time"]["dt"], scene["time"]["steps"]
     fps, start = float(scene["output"]["fps"]), scene["output"]["start_frame"]
-    return FrameClock(fps, start, _ceil((1.0 / fps) / dt), max(1, _ceil(steps * dt * fps)))
+    substeps, count = max(1, _ceil((1.0 / fps) / dt)), max(1, _ceil(steps * dt * fps))
+    if substeps * count > MAX_STEPS:
+        raise SceneError(f"time.steps * time.dt = {steps * dt:g} s at output.fps = {fps:g} is "
+                         f"{count} frames of {substeps} steps, more than {MAX_STEPS} steps "
+                         "(is time.dt or output.fps a typo?)")
+    return FrameClock(fps, start, substeps, count)
