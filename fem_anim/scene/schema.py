@@ -254,8 +254,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "output": {
         "directory": Key(str, None, c.output_directory,
                          doc="output directory, relative (default out/<name>; -o wins)"),
-        "fps": Key(NUM, 24.0, c.positive, unit="frames/s", doc="frame rate: frame k is the converged state at "
-                   "t = k/fps, whatever time.dt is (24: film, Blender, USD)"),
+        "fps": Key(NUM, 24.0, c.positive, unit="frames/s",
+                   doc="frame rate: frame k is the converged state at t = k/fps, whatever "
+                   "time.dt is (24: film, Blender, USD)"),
         "start_frame": Key(int, 1, c.non_negative, doc="the number of frame 0 (the initial "
                            "state) in USD time codes and file names"),
         "every": Key(int, 1, c.at_least_one, unit="frames", doc="write every n-th frame"),
