@@ -28,6 +28,8 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "SIGNALS": "interrupt",
     "stop_at_once": "interrupt",
     "AdaptiveStepper": "adaptive",
+    "FrameClock": "frame_clock",
+    "frame_clock": "frame_clock",
     "RunResult": "run_loop",
     "Simulation": "loop",
     "solver_options": "loop",

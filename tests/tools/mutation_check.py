@@ -616,13 +616,13 @@ MUTATIONS: list[Mutation] = [
 
     # frames at output.fps (fem_anim/simulation/frame_clock.py, run_loop.py)
     Mutation("frame-substeps-floor", "fem_anim/simulation/frame_clock.py",
-             "    return FrameClock(fps, start, _ceil((1.0 / fps) / dt),",
-             "    return FrameClock(fps, start, max(1, int((1.0 / fps) / dt)),",
+             "    substeps, count = max(1, _ceil((1.0 / fps) / dt)),",
+             "    substeps, count = max(1, int((1.0 / fps) / dt)),",
              ("tests/test_frame_rate.py::test_frame_clock",),
              "frame intervals split into steps longer than time.dt"),
     Mutation("frame-count-rounded", "fem_anim/simulation/frame_clock.py",
-             "max(1, _ceil(steps * dt * fps)))",
-             "max(1, round(steps * dt * fps)))",
+             "max(1, _ceil(steps * dt * fps))",
+             "max(1, round(steps * dt * fps))",
              ("tests/test_frame_rate.py::test_frame_clock",),
              "the run stops before steps * dt when that is not a whole frame"),
     Mutation("frame-count-no-round-off", "fem_anim/simulation/frame_clock.py",
