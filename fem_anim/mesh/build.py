@@ -18,6 +18,7 @@ from fem_anim.mesh.gmsh_session import gmsh_arrays, gmsh_session
 from fem_anim.mesh.mesh_file import read_mesh_file
 from fem_anim.mesh.simplex import SimplexMesh, mesh_from_arrays
 from fem_anim.meshes.structured import structured_box
+from fem_anim.scene.schema import LENGTH_UNITS
 
 __all__ = ["build_mesh", "mesh_arrays"]
 
@@ -61,7 +62,9 @@ def mesh_arrays(cfg: dict, base_dir: Path) -> tuple[np.ndarray, np.ndarray, np.n
     if cfg["shape"] == "file":
         path = Path(cfg["file"])
         path = path if path.is_absolute() else base_dir / path
-        return (*read_mesh_file(path, cfg["dim"], cfg["element_size"]), f"mesh file {path}")
+        scale = LENGTH_UNITS[cfg.get("units", "m")] * cfg.get("scale", 1.0)
+        return (*read_mesh_file(path, cfg["dim"], cfg["element_size"], scale,
+                                cfg.get("fill", "auto")), f"mesh file {path}")
     if cfg["shape"] == "box" and cfg.get("divisions") is not None:
         points, cells = structured_box(cfg["size"], cfg["divisions"], cfg["origin"])
         return (points, cells, np.ones(len(cells), np.int32), {"body": 1},

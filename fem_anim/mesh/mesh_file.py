@@ -1,8 +1,12 @@
-"""Reading a mesh file: any format meshio reads, a closed surface filled with tetrahedra.
+"""Reading a mesh file: any format meshio reads (glTF/GLB through trimesh), a surface filled
+with tetrahedra.
 
 :func:`read_mesh_file` gives the points, simplices, region markers and marker names of a
-file (rank 0); a file holding only a closed triangulated surface (STL, OBJ, PLY) in 3D is
-filled with tetrahedra by gmsh (:func:`fem_anim.meshes.build_volume_from_surface`).
+file (rank 0), its coordinates scaled to metres; a file holding only a triangulated surface
+(STL, OBJ, PLY, glTF, GLB) in 3D is filled with tetrahedra: by gmsh when it is closed and
+clean (:func:`fem_anim.meshes.build_volume_from_surface`), else by fTetWild, which repairs
+holes, duplicated faces and overlapping shells
+(:func:`fem_anim.mesh.surface_repair.repair_surface_to_tets`).
 """
 
 from __future__ import annotations
@@ -17,22 +21,29 @@ from fem_anim.errors import MeshError
 from fem_anim.mesh.checks import check_surface
 from fem_anim.mesh.gmsh_session import gmsh_arrays, gmsh_session
 from fem_anim.mesh.simplex import CELL_NAMES, drop_unused_points
+from fem_anim.mesh.surface_repair import repair_surface_to_tets
 
-__all__ = ["MARKER_KEYS", "MESHIO_TYPES", "read_mesh_file"]
+__all__ = ["MARKER_KEYS", "MESHIO_TYPES", "TRIMESH_SUFFIXES", "read_mesh_file"]
 
 PLURAL = {2: "triangles", 3: "tetrahedra"}
 #: meshio cell types read as simplices of each dimension (higher-order ones by their corners).
 MESHIO_TYPES = {2: ("triangle", "triangle6", "triangle7"), 3: ("tetra", "tetra10")}
 #: Integer cell data taken as region markers, first found wins.
 MARKER_KEYS = ("gmsh:physical", "medit:ref", "cell_markers", "CellEntityIds")
+#: Surface formats meshio does not read, read by trimesh (all meshes of the file, placed).
+TRIMESH_SUFFIXES = (".gltf", ".glb")
 
 
 def _fill_surface(points: np.ndarray, triangles: np.ndarray, element_size: float,
-                  source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """Tetrahedralise the solid a closed surface bounds (checked first by :func:`check_surface`).
+                  source: str, fill: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """Tetrahedralise the solid a surface bounds.
+
+    ``fill = "gmsh"``: the surface must pass :func:`check_surface` and gmsh fills it;
+    ``"tetwild"``: fTetWild repairs and fills it; ``"auto"``: gmsh, and fTetWild when the
+    surface is not closed, manifold and connected or gmsh fails (self-intersections).
 
     Raises:
-        MeshError: if the surface is not closed, manifold and connected, or gmsh fails.
+        MeshError: if the chosen mesher fails, or nothing usable is left of the surface.
     """
     from fem_anim.meshes import build_volume_from_surface
 
@@ -42,16 +53,25 @@ def _fill_surface(points: np.ndarray, triangles: np.ndarray, element_size: float
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)
     points, triangles = points[first[order]], rank[inverse.reshape(-1)][triangles]
-    check_surface(points, triangles, source)
-    with gmsh_session(source, "the surface must not intersect itself") as model:
-        model = build_volume_from_surface(model, points, triangles, element_size)
-        points, cells, markers, names = gmsh_arrays(model, 3)
-    if cells.shape[0] == 0:
-        raise MeshError(f"{source}: gmsh made no tetrahedra inside the surface")
-    return points, cells, markers, names
+    if fill != "tetwild":
+        try:
+            check_surface(points, triangles, source)
+            with gmsh_session(source, "the surface must not intersect itself") as model:
+                model = build_volume_from_surface(model, points, triangles, element_size)
+                filled, cells, markers, names = gmsh_arrays(model, 3)
+            if cells.shape[0] == 0:
+                raise MeshError(f"{source}: gmsh made no tetrahedra inside the surface")
+            return filled, cells, markers, names
+        except MeshError as err:
+            if fill == "gmsh":
+                raise MeshError(f"{err} (mesh.fill = \"tetwild\" repairs such surfaces)") \
+                    from None
+    filled, cells = repair_surface_to_tets(points, triangles, element_size, source)
+    return filled, cells, np.ones(len(cells), np.int32), {}
 
 
-def read_mesh_file(path: Path, dim: int, element_size: float
+def read_mesh_file(path: Path, dim: int, element_size: float, scale: float = 1.0,
+                   fill: str = "auto"
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, int]]:
     """Points, simplices, region markers and their names of a mesh file (rank 0).
 
@@ -60,14 +80,17 @@ def read_mesh_file(path: Path, dim: int, element_size: float
     gmsh file's boundary triangles), and points no cell uses are dropped. Markers come from
     the first of :data:`MARKER_KEYS` present (gmsh physical groups, medit references), else
     all 1; names come from the file's field data (gmsh ``$PhysicalNames``). For ``dim = 3``
-    a file of triangles only, such as an STL, OBJ or PLY surface, is
-    taken as a closed surface and filled with tetrahedra of edge ``element_size``
-    (:func:`check_surface`, :func:`fem_anim.meshes.build_volume_from_surface`).
+    a file of triangles only, such as an STL, OBJ, PLY, glTF or GLB surface, is filled with
+    tetrahedra of edge ``element_size`` (:func:`_fill_surface`: gmsh for a closed clean
+    surface, fTetWild for an open or self-intersecting one, as ``fill`` says).
 
     Args:
         path: The mesh file.
         dim: 2 or 3, the scene's ``mesh.dim``.
-        element_size: Edge length of the tetrahedra filling a closed surface (m).
+        element_size: Edge length of the tetrahedra filling a surface (m).
+        scale: Metres per unit of the file's coordinates (``mesh.units`` times
+            ``mesh.scale``); applied before a surface is filled.
+        fill: ``mesh.fill``: ``"auto"``, ``"gmsh"`` or ``"tetwild"``.
 
     Returns:
         ``(points (n, dim), cells (m, dim + 1), markers (m,), names)``.
@@ -83,14 +106,15 @@ def read_mesh_file(path: Path, dim: int, element_size: float
     chatter = io.StringIO()  # meshio prints warnings, and errors before sys.exit(1)
     try:
         with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
-            m = meshio.read(path)
+            m = _read_trimesh(path) if path.suffix.lower() in TRIMESH_SUFFIXES else \
+                meshio.read(path)
     except SystemExit:  # meshio's end when no reader for the extension accepts the file
         detail = " ".join(chatter.getvalue().replace("Error:", "").split())
         raise MeshError(f"{source} cannot be read: {detail or 'meshio gave up'}") from None
     except Exception as err:  # noqa: BLE001 (meshio raises many types for malformed files)
         detail = " ".join(str(err).split()) or type(err).__name__
         raise MeshError(f"{source} cannot be read: {detail}") from None
-    points = np.asarray(m.points, dtype=np.float64)
+    points = np.asarray(m.points, dtype=np.float64) * scale
     if points.ndim != 2 or points.shape[1] not in (2, 3):
         raise MeshError(f"{source}: points must have 2 or 3 coordinates, got shape "
                         f"{points.shape}")
@@ -110,7 +134,7 @@ def read_mesh_file(path: Path, dim: int, element_size: float
         if points.shape[1] != 3 or np.ptp(points[:, 2]) == 0.0:
             raise MeshError(f"{source} is a plane triangle mesh without tetrahedra; set "
                             "mesh.dim = 2 for it (a surface to fill must be closed)")
-        return _fill_surface(points, triangles, element_size, source)
+        return _fill_surface(points, triangles, element_size, source, fill)
     if not take:
         raise MeshError(f"{source} has no {CELL_NAMES[dim]} cells for mesh.dim = {dim} (cell "
                         f"types found: {', '.join(found)})")
@@ -139,3 +163,15 @@ def _cell_dim(cell_type: str) -> int:
         if cell_type.startswith(prefixes):
             return dim
     return 0
+
+
+def _read_trimesh(path: Path):
+    """A glTF/GLB file as a meshio mesh of triangles: every mesh of its scene, placed by the
+    scene's transforms, concatenated (trimesh)."""
+    import meshio
+    import trimesh
+
+    mesh = trimesh.load(str(path), force="mesh", process=False)
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError("no triangles in the file")
+    return meshio.Mesh(np.asarray(mesh.vertices), [("triangle", np.asarray(mesh.faces))])

@@ -25,7 +25,7 @@ __all__ = ["Key", "KeyInfo", "SCHEMA", "DEFAULTS", "SECTIONS", "OPTIONAL_SECTION
            "ARRAY_SECTIONS", "BODY_TABLES", "BODY_ARRAYS", "REQUIRED", "NUM", "scene_keys",
            "type_text", "MATERIAL_MODELS", "FORMULATIONS", "INTEGRATORS", "MESH_SHAPES",
            "HESSIAN_UPDATES", "NONLINEAR_METHODS", "OBSTACLE_TYPES", "COLOR_FIELDS", "VIEWS",
-           "RENDER_OUTPUTS"]
+           "RENDER_OUTPUTS", "SURFACE_FILLS", "LENGTH_UNITS"]
 
 MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
                    "corotated_lagged", "mooney_rivlin")
@@ -37,6 +37,10 @@ MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
 HESSIAN_UPDATES = ("every_iteration", "every_step", "lagged", "rest")
 NONLINEAR_METHODS = ("newton", "trust_region", "lbfgs", "ncg", "gradient_descent")
 OBSTACLE_TYPES = ("plane", "sphere")
+#: ``mesh.fill``: how a surface file becomes tetrahedra (:mod:`fem_anim.mesh.surface_repair`).
+SURFACE_FILLS = ("auto", "gmsh", "tetwild")
+#: ``mesh.units``: metres per unit of a mesh file's coordinates.
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "ft": 0.3048}
 #: What ``render.color_by`` may name: vertex |displacement|, the cells' mean psi, or one
 #: colour per body (the mesh's connected parts: the ``[[body]]`` tables in order).
 COLOR_FIELDS = ("displacement", "energy_density", "body")
@@ -91,6 +95,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "element_size": Key(NUM, 0.05, c.positive, unit="m", doc="gmsh target edge length"),
         "file": Key(str, None, unit="", doc="shape = \"file\": a volume mesh meshio reads or "
                     "a closed STL/OBJ/PLY surface, relative to the scene file"),
+        "fill": Key(str, "auto", choices=SURFACE_FILLS, doc="a surface file's tetrahedra: "
+                    "\"auto\" (gmsh if closed and clean, else repaired by fTetWild), "
+                    "\"gmsh\", \"tetwild\""),
+        "units": Key(str, "m", choices=tuple(LENGTH_UNITS), doc="the length unit of a mesh "
+                     "file's coordinates (converted to metres)"),
+        "scale": Key(NUM, 1.0, c.positive, doc="a mesh file's coordinates are multiplied by "
+                     "scale (after units), about the origin"),
         "divisions": Key(list, None, c.divisions, V, doc="box only: a structured grid of "
                          "cells per axis, cut into simplices (instead of gmsh)"),
     },
@@ -119,8 +130,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "time": {
         "integrator": Key(str, "newmark", choices=INTEGRATORS, doc="time integrator"),
-        "dt": Key(NUM, 1.0 / 60.0, c.positive, unit="s", doc="time step, one frame"),
-        "steps": Key(int, 60, c.steps, unit="frames", doc="number of frames to simulate"),
+        "dt": Key(NUM, 1.0 / 60.0, c.positive, unit="s",
+                  doc="the largest time step: each frame interval 1/output.fps is split into "
+                  "the fewest equal steps no longer than dt"),
+        "steps": Key(int, 60, c.steps, doc="the run lasts steps * dt, up to the next whole "
+                     "frame of output.fps"),
         "adaptive": Key(bool, True, doc="retry a failed step with dt halved, then grow dt "
                         "back"),
         "min_dt": Key(NUM, None, c.positive, unit="s",
@@ -244,6 +258,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "output": {
         "directory": Key(str, None, c.output_directory,
                          doc="output directory, relative (default out/<name>; -o wins)"),
+        "fps": Key(NUM, 24.0, c.positive, unit="frames/s",
+                   doc="frame rate: frame k is the converged state at t = k/fps, whatever "
+                   "time.dt is (24: film, Blender, USD)"),
+        "start_frame": Key(int, 1, c.non_negative, doc="the number of frame 0 (the initial "
+                           "state) in USD time codes and file names"),
         "every": Key(int, 1, c.at_least_one, unit="frames", doc="write every n-th frame"),
         "checkpoint_every": Key(int, None, c.at_least_one, unit="frames",
                                 doc="frames between checkpoints (default steps/10)"),

@@ -29,6 +29,8 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "stop_at_once": "interrupt",
     "GRACE_S": "signal_watch",
     "AdaptiveStepper": "adaptive",
+    "FrameClock": "frame_clock",
+    "frame_clock": "frame_clock",
     "RunResult": "run_loop",
     "Simulation": "loop",
     "solver_options": "loop",

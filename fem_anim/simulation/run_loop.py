@@ -1,6 +1,7 @@
 """The frame loop of :meth:`Simulation.run <fem_anim.simulation.loop.Simulation.run>`:
-``time.steps`` frames, each reached by adaptive substeps
-(:class:`~fem_anim.simulation.adaptive.AdaptiveStepper`), with the run's files.
+frames at k / ``output.fps`` up to ``time.steps * time.dt`` (the frame clock,
+:mod:`fem_anim.simulation.frame_clock`), each reached by adaptive substeps no longer than
+``time.dt`` (:class:`~fem_anim.simulation.adaptive.AdaptiveStepper`), with the run's files.
 
 Per frame it writes the stats rows and, every ``output.every`` frames, the trajectory
 frame (displacement and cell energy density), and every ``output.checkpoint_every`` frames
@@ -14,7 +15,7 @@ from __future__ import annotations
 import signal
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,7 @@ from fem_anim.output.trajectory import TrajectoryWriter
 from fem_anim.simulation.adaptive import AdaptiveStepper
 from fem_anim.simulation.checkpoint import (Checkpoint, describe_resume, load_checkpoint,
                                             restore_pattern, save_checkpoint)
+from fem_anim.simulation.frame_clock import FrameClock, frame_clock
 from fem_anim.simulation.integrators import State
 from fem_anim.simulation.interrupt import Interrupts
 from fem_anim.simulation.progress import Progress
@@ -46,15 +48,14 @@ class RunResult:
 
 def run_frames(sim, output_dir: Path | None, quiet: bool, resume: bool) -> RunResult:
     """:meth:`Simulation.run <fem_anim.simulation.loop.Simulation.run>` (see there)."""
-    cfg = sim.scene["time"]
-    h, steps, every = cfg["dt"], cfg["steps"], sim.scene["output"]["every"]
+    clock, every = frame_clock(sim.scene), sim.scene["output"]["every"]
     run_dir = RunDirectory(output_dir, sim.comm, resume) if output_dir is not None \
         else None
     start = time.perf_counter()
     try:  # nothing is deleted on failure: the staging area is what --resume continues
         with Interrupts(sim.comm) as interrupts:
             try:
-                result = _loop(sim, h, steps, every, run_dir, quiet, resume, interrupts)
+                result = _loop(sim, clock, every, run_dir, quiet, resume, interrupts)
             except FemAnimError as err:
                 if interrupts.received is None or isinstance(err, Interrupted):
                     raise
@@ -117,7 +118,7 @@ def _restore(sim, stepper: AdaptiveStepper, ck: Checkpoint) -> None:
     """Put a checkpoint's state across steps back: the adaptive step, the Hessian shift,
     the contact's barrier stiffness and the Hessian's pattern, the mixed formulation's
     pressure, the velocity the energies report (collective)."""
-    stepper.dt, stepper.last_dt = ck.stepper["dt"], ck.stepper["last_dt"]
+    stepper.dt, stepper.last_dt = min(ck.stepper["dt"], stepper.h), ck.stepper["last_dt"]
     if sim.minimiser.shift:
         sim.minimiser.shift.c = ck.shift
     p = sim.problem
@@ -135,13 +136,33 @@ def _restore(sim, stepper: AdaptiveStepper, ck: Checkpoint) -> None:
         raise FemAnimError(f"the checkpoint does not match this mesh: {err.args[0]}") from None
 
 
-def _loop(sim, h, steps, every, run_dir, quiet, resume, interrupts) -> RunResult:
-    stepper = AdaptiveStepper(sim, h, sim.scene["time"])
+def _on_frame(state: State, clock: FrameClock, frame: int) -> State:
+    """The state with its time set to frame ``frame``'s exact time k/fps.
+
+    The stepper lands on the frame time up to the round-off of summing substeps; the frame
+    is written (and its time recorded) at k/fps exactly, so time codes are whole numbers.
+
+    Raises:
+        FemAnimError: if the state is not at that frame's time (a checkpoint of another
+            frame clock, e.g. written before ``output.fps`` or with other time keys).
+    """
+    t = clock.time(frame)
+    if abs(state.time - t) > 1e-9 * clock.step:
+        raise FemAnimError(f"the state at t = {state.time!r} s is not frame {frame} at "
+                           f"t = {t!r} s of output.fps = {clock.fps:g} (were time.dt or "
+                           "output.fps changed?)")
+    return replace(state, time=t)
+
+
+def _loop(sim, clock: FrameClock, every, run_dir, quiet, resume, interrupts) -> RunResult:
+    stepper = AdaptiveStepper(sim, clock.step, sim.scene["time"])
+    steps = clock.count
     checkpoint_every = sim.scene["output"]["checkpoint_every"] or max(1, steps // 10)
     first, rows, kept, resumed_rows = 1, [], None, 0
     if resume:
         ck = load_checkpoint(run_dir.file("checkpoint.npz"), sim)
         state, first, rows, kept = ck.state, ck.frame + 1, ck.rows, ck.frames_written
+        state = _on_frame(state, clock, ck.frame)
         resumed_rows = len(rows)
         _restore(sim, stepper, ck)
     else:
@@ -170,10 +191,11 @@ def _loop(sim, h, steps, every, run_dir, quiet, resume, interrupts) -> RunResult
         if trajectory and not resume:
             _io(sim, trajectory.h5_path, trajectory.write, 0.0, *sim.frame_fields(state))
         for frame in range(first, steps + 1):
-            for state, row in stepper.advance(state, frame * h):
+            for state, row in stepper.advance(state, clock.time(frame)):
                 rows.append(row)
                 if stats_file:
                     _io(sim, stats_file.path, stats_file.write, row)
+            state = _on_frame(state, clock, frame)
             if trajectory and (frame % every == 0 or frame == steps):
                 _io(sim, trajectory.h5_path, trajectory.write, state.time,
                     *sim.frame_fields(state))
