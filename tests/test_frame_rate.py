@@ -56,9 +56,11 @@ def test_frame_clock(dt, steps, fps, substeps, count):
 
 
 def test_default_frame_rate_and_start_frame():
-    scene = fem_anim.Scene.from_dict({"name": "defaults"})
+    """Without output.fps a run keeps the step clock: frame k is step k at exactly k dt."""
+    scene = fem_anim.Scene.from_dict({"name": "defaults", "time": {"dt": 0.1, "steps": 7}})
     clock = frame_clock(scene)
-    assert (clock.fps, clock.start_frame, clock.number(0)) == (24.0, 1, 1)
+    assert (clock.start_frame, clock.number(0), clock.substeps, clock.count) == (1, 1, 1, 7)
+    assert clock.step == 0.1 and [clock.time(k) for k in range(8)] == [k * 0.1 for k in range(8)]
 
 
 def test_frames_are_converged_states_at_the_frame_times(tmp_path):

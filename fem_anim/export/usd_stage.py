@@ -201,7 +201,7 @@ def write_usd(run: RunData, path: Path, start_frame: int = 1) -> None:
         raise OSError(errno.EIO, f"USD cannot write it: {_reason(err)}", str(path)) from None
 
 
-def export_staged_run(staging: Path, name: str, comm) -> None:
+def export_staged_run(staging: Path, name: str, comm, start_frame: int = 1) -> None:
     """``[output] usd = true``: write ``<scene>.usdc`` into a run's staging area (rank 0).
 
     The stage is written to a temporary name and renamed, so the file is complete or
@@ -211,6 +211,7 @@ def export_staged_run(staging: Path, name: str, comm) -> None:
         staging: The staging area holding the run's trajectory and scene.
         name: The scene's name.
         comm: The run's communicator (only rank 0 writes).
+        start_frame: The time code of frame 0 (``output.start_frame``).
 
     Raises:
         OSError: (rank 0) if the file cannot be written, naming it.
@@ -224,7 +225,7 @@ def export_staged_run(staging: Path, name: str, comm) -> None:
             run = read_run(staging)
         except FemAnimError as err:
             raise OSError(errno.EIO, str(err), str(target)) from None
-        write_usd(run, tmp)
+        write_usd(run, tmp, start_frame)
         os.replace(tmp, target)
     except OSError as err:
         raise OSError(err.errno, err.strerror, str(target)) from None

@@ -131,10 +131,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "time": {
         "integrator": Key(str, "newmark", choices=INTEGRATORS, doc="time integrator"),
         "dt": Key(NUM, 1.0 / 60.0, c.positive, unit="s",
-                  doc="the largest time step: each frame interval 1/output.fps is split into "
-                  "the fewest equal steps no longer than dt"),
-        "steps": Key(int, 60, c.steps, doc="the run lasts steps * dt, up to the next whole "
-                     "frame of output.fps"),
+                  doc="the time step; with output.fps, the largest one: each frame interval "
+                  "1/output.fps is split into the fewest equal steps no longer than dt"),
+        "steps": Key(int, 60, c.steps, doc="the run lasts steps * dt (one frame per step; with "
+                     "output.fps, up to the next whole frame)"),
         "adaptive": Key(bool, True, doc="retry a failed step with dt halved, then grow dt "
                         "back"),
         "min_dt": Key(NUM, None, c.positive, unit="s",
@@ -258,9 +258,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "output": {
         "directory": Key(str, None, c.output_directory,
                          doc="output directory, relative (default out/<name>; -o wins)"),
-        "fps": Key(NUM, 24.0, c.positive, unit="frames/s",
+        "fps": Key(NUM, None, c.positive, unit="frames/s",
                    doc="frame rate: frame k is the converged state at t = k/fps, whatever "
-                   "time.dt is (24: film, Blender, USD)"),
+                   "time.dt is (24: film, Blender, USD); not given: one frame per step"),
         "start_frame": Key(int, 1, c.non_negative, doc="the number of frame 0 (the initial "
                            "state) in USD time codes and file names"),
         "every": Key(int, 1, c.at_least_one, unit="frames", doc="write every n-th frame"),

@@ -35,6 +35,7 @@ from mpi4py import MPI
 from fem_anim import compat
 from fem_anim.errors import FemAnimError
 from fem_anim.output.rundir import write_atomically
+from fem_anim.simulation.frame_clock import frame_clock
 from fem_anim.simulation.hessian_pattern import extra_couplings, restore_couplings
 from fem_anim.simulation.integrators import State
 
@@ -192,7 +193,8 @@ def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: i
 def _invalid(meta, data: dict, sim) -> str | None:
     """What is wrong with a checkpoint's contents for ``sim``, or None.
 
-    A checkpoint is written after frame k, 1 <= k < steps, at t = k h after ``step``
+    A checkpoint is written after frame k, 1 <= k < K (the frame clock's last frame), at the
+    frame's time (:func:`~fem_anim.simulation.frame_clock.frame_clock`) after ``step``
     accepted substeps (one stats row each), with at most k / every + 1 trajectory frames;
     its arrays are one row per dof block of this scene's mesh, all finite.
     """
@@ -202,8 +204,8 @@ def _invalid(meta, data: dict, sim) -> str | None:
         what = f": {'; '.join(changed)}" if changed else ""
         return f"it was written for a different scene (the scene's physics changed{what}; " \
                f"only {', '.join(f'[{t}]' for t in NOT_PHYSICS)} may change on resume)"
-    cfg = sim.scene["time"]
-    h, steps, every = cfg["dt"], cfg["steps"], sim.scene["output"]["every"]
+    clock = frame_clock(sim.scene)
+    h, steps, every = clock.step, clock.count, sim.scene["output"]["every"]
     ints = ("step", "frame", "frames_written")
     if not all(type(meta.get(k)) is int for k in ints) or \
             not all(isinstance(meta.get(k), (int, float)) for k in ("time", "shift")) or \
@@ -213,9 +215,9 @@ def _invalid(meta, data: dict, sim) -> str | None:
     if type(meta.get("every")) is int and meta["every"] >= 1:  # output.every may change
         every = meta["every"]
     if not 1 <= frame < steps:
-        return f"frame {frame} is outside 1..{steps - 1} (time.steps = {steps})"
-    if not math.isclose(meta["time"], frame * h, rel_tol=1e-9, abs_tol=1e-9 * h):
-        return f"time {meta['time']!r} is not frame {frame} x time.dt = {frame * h!r}"
+        return f"frame {frame} is outside 1..{steps - 1} (the run's last frame is {steps})"
+    if not math.isclose(meta["time"], clock.time(frame), rel_tol=1e-9, abs_tol=1e-9 * h):
+        return f"time {meta['time']!r} is not frame {frame}'s time {clock.time(frame)!r}"
     if step < frame or len(meta["rows"]) != step:
         return f"step {step} does not match frame {frame} and its {len(meta['rows'])} stats rows"
     if not 1 <= written <= frame // every + 1:

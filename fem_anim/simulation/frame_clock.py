@@ -12,6 +12,9 @@ the step is the same throughout the run (BDF2 keeps its history, Newmark its ord
 run covers the time ``time.steps * time.dt`` it was asked for, up to the next whole frame:
 K = ceil(steps * dt * fps), with a product within 1e-6 of an integer taken as that integer.
 Frame k is numbered ``output.start_frame + k`` in file names and USD time codes.
+
+Without ``output.fps`` a run keeps the step clock: frame k is step k, at t = k dt, and
+``time.steps`` frames are written (one step each), exactly as a run has always been stepped.
 """
 
 from __future__ import annotations
@@ -44,17 +47,20 @@ class FrameClock:
         start_frame: The number of frame 0 (file names, USD time codes).
         substeps: Equal substeps per frame interval, n = ceil((1/fps) / dt).
         count: The last frame K (frames 0..K are written, frame 0 the initial state).
+        step_clock: ``time.dt`` when ``output.fps`` is not given: frame k is step k at
+            t = k dt (fps is then 1/dt); None for an output frame rate.
     """
 
     fps: float
     start_frame: int
     substeps: int
     count: int
+    step_clock: float | None = None
 
     @property
     def interval(self) -> float:
-        """The frame interval 1/fps (s)."""
-        return 1.0 / self.fps
+        """The frame interval 1/fps (s): ``time.dt`` on the step clock."""
+        return self.step_clock if self.step_clock is not None else 1.0 / self.fps
 
     @property
     def step(self) -> float:
@@ -67,8 +73,9 @@ class FrameClock:
         return self.time(self.count)
 
     def time(self, k: int) -> float:
-        """The time of frame k, k/fps (s): a quotient, so no round-off accumulates."""
-        return k / self.fps
+        """The time of frame k, k/fps (s): a quotient, so no round-off accumulates
+        (k dt on the step clock)."""
+        return k * self.step_clock if self.step_clock is not None else k / self.fps
 
     def number(self, k: int) -> int:
         """The number of frame k in file names and USD time codes: start_frame + k."""
@@ -84,7 +91,8 @@ def frame_clock(scene) -> FrameClock:
 
     Returns:
         The :class:`FrameClock`: frames at k/fps up to the first frame time at or after
-        ``steps * dt``, reached by substeps of (1/fps)/ceil((1/fps)/dt).
+        ``steps * dt``, reached by substeps of (1/fps)/ceil((1/fps)/dt); without
+        ``output.fps``, the step clock (frame k at k dt, ``steps`` frames).
 
     Raises:
         SceneError: if the run would take more than
@@ -96,7 +104,10 @@ def frame_clock(scene) -> FrameClock:
         (3, 24, 1.0, 1)
     """
     dt, steps = scene["time"]["dt"], scene["time"]["steps"]
-    fps, start = float(scene["output"]["fps"]), scene["output"]["start_frame"]
+    start = scene["output"]["start_frame"]
+    if scene["output"]["fps"] is None:  # the step clock: one frame per step
+        return FrameClock(1.0 / dt, start, 1, steps, step_clock=dt)
+    fps = float(scene["output"]["fps"])
     substeps, count = max(1, _ceil((1.0 / fps) / dt)), max(1, _ceil(steps * dt * fps))
     if substeps * count > MAX_STEPS:
         raise SceneError(f"time.steps * time.dt = {steps * dt:g} s at output.fps = {fps:g} is "

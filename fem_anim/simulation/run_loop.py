@@ -70,7 +70,7 @@ def run_frames(sim, output_dir: Path | None, quiet: bool, resume: bool) -> RunRe
             with sim.clock.phase("output"):
                 if sim.scene["output"]["usd"]:  # installed with the run's other files
                     _io(sim, run_dir.file(usd_file_name(sim.scene.name)), export_staged_run,
-                        run_dir.staging, sim.scene.name, sim.comm)
+                        run_dir.staging, sim.scene.name, sim.comm, clock.start_frame)
                 run_dir.commit()
             if sim.scene["output"]["render"]:
                 with sim.clock.phase("render"):
