@@ -294,7 +294,7 @@ def test_library_error_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch, err
     path = tmp_path / "scene.toml"
     path.write_text(FACE_TO_FACE)
     code = main(["run", str(path), "-o", str(tmp_path / "out"), "--set",
-                 "output.render=false"])
+                 "output.render=false", "-q"])  # -q: no first line naming the integrator
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and err[0].startswith("fem-anim: error:"), err
     assert ("out of memory" in err[0]) == isinstance(error, MemoryError), err[0]

@@ -5,8 +5,10 @@ precision between two scales of the scene: its size L (the bounding box of the b
 and its element size h. Each check below refuses, before anything is built, a value that
 cannot give a step that ends:
 
-* ``dhat`` at least :data:`MIN_DHAT_RATIO` L: distances below that are lost in the round-off of
-  coordinates of size L, and the CCD bisects without end; and smaller than the smallest element
+* ``dhat`` at least :data:`MIN_DHAT_RATIO` L: a distance is a difference of coordinates of size
+  up to L, resolved to eps L (eps the double precision's 2.2e-16); d-hat must span 1e5 of those
+  units, so gaps of a thousandth of d-hat are still resolved to a hundred; below that the
+  barrier acts on round-off and the CCD bisects without end; and smaller than the smallest element
   size h (larger, a body's own neighbouring surface elements are all pairs at rest).
 * ``stiffness`` kappa (Pa) such that the barrier's stiffness against an element's,
   r = (kappa / E) (h / dhat), lies in [:data:`MIN_BARRIER_RATIO`, :data:`MAX_BARRIER_RATIO`]:
@@ -36,7 +38,7 @@ from fem_anim.errors import SceneError
 __all__ = ["MIN_DHAT_RATIO", "MIN_BARRIER_RATIO", "MAX_BARRIER_RATIO", "MAX_FRICTION",
            "check_contact_limits", "body_box"]
 
-MIN_DHAT_RATIO = 1.0e-8
+MIN_DHAT_RATIO = 1.0e5 * float(np.finfo(float).eps)
 MIN_BARRIER_RATIO = 1.0e-8
 MAX_BARRIER_RATIO = 1.0e12
 MAX_FRICTION = 10.0
@@ -117,7 +119,7 @@ def _check_barrier(where: str, cfg: dict[str, Any], bodies: list[dict], size: fl
     """dhat, stiffness and friction of ``[contact]`` or one ``[[obstacle]]``."""
     dhat = cfg["dhat"]
     if size > 0 and dhat < MIN_DHAT_RATIO * size:
-        raise SceneError(f"{where}.dhat must be at least {MIN_DHAT_RATIO:g} times the scene's "
+        raise SceneError(f"{where}.dhat must be at least {MIN_DHAT_RATIO:.2g} times the scene's "
                          f"size ({size:.3g} m), {MIN_DHAT_RATIO * size:.3g} m: smaller "
                          f"distances are lost in the round-off of the coordinates, got {dhat}")
     for body in bodies if where == "contact" else ():
