@@ -49,7 +49,7 @@ class ReportedEnergies:
         """
         self.u.x.array[:] = u
         self.update_quadrature_data()
-        num_owned = self.domain.mesh.topology.index_map(self.d).size_local
+        num_owned = self.domain.mesh.topology.index_map(self.domain.mesh.topology.dim).size_local
         cell_dofs = compat.cell_dofs(self.W0)[:num_owned, 0]
         if self._cell_volumes is None:
             mesh = self.domain.mesh

@@ -24,11 +24,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import ufl
+from dolfinx import fem
+from petsc4py import PETSc
 from ufl.geometry import FacetJacobian
 
 from fem_anim.forms import shell_bending, shell_membrane
 
-__all__ = ["ShellEnergy", "shell_measures"]
+__all__ = ["ShellEnergy", "shell_measures", "shell_thickness"]
+
+
+def shell_thickness(scene) -> float:
+    """The scene's ``shell.thickness`` (m), or 1 for a solid (its density stays per volume)."""
+    return float(scene["shell"]["thickness"]) if "shell" in scene.data else 1.0
 
 
 def shell_measures(mesh) -> tuple[ufl.Measure, ufl.Measure]:
@@ -63,15 +70,38 @@ class ShellEnergy:
     thickness: object
     bending: object
 
-    def membrane(self, u, dx: ufl.Measure) -> ufl.Form:
-        """``int t psi(F(u)) dA`` (J)."""
+    @classmethod
+    def from_scene(cls, scene, mesh, mu, lmbda) -> ShellEnergy:
+        """The shell of a scene's ``[material]`` and ``[shell]`` (``bending = "derived"``:
+        :func:`fem_anim.forms.shell_bending.hinge_stiffness` of E, nu and t).
+
+        Args:
+            scene: A validated scene with a ``[shell]`` table.
+            mesh: Its surface mesh.
+            mu: The shear modulus (a DOLFINx Constant, Pa).
+            lmbda: The first Lame parameter (a DOLFINx Constant, Pa).
+        """
+        mat, cfg = scene["material"], scene["shell"]
+        t = float(cfg["thickness"])
+        k = cfg["bending"]
+        if k == "derived":
+            k = shell_bending.hinge_stiffness(mat["youngs_modulus"], mat["poisson_ratio"], t)
+        return cls(mat["model"], mu, lmbda, fem.Constant(mesh, PETSc.ScalarType(t)),
+                   fem.Constant(mesh, PETSc.ScalarType(k)))
+
+    def density(self, u) -> ufl.core.expr.Expr:
+        """The membrane energy per rest area ``t psi(F(u))`` (J/m^2)."""
         J = ufl.Jacobian(u.function_space.mesh.ufl_domain())
         F = shell_membrane.surface_deformation_gradient(u, J)
-        return self.thickness * shell_membrane.membrane_psi(self.model, F, self.mu,
-                                                            self.lmbda) * dx
+        return self.thickness * shell_membrane.membrane_psi(self.model, F, self.mu, self.lmbda)
 
-    def bending_energy(self, u, dS: ufl.Measure) -> ufl.Form:
-        """The hinge energy over the interior edges (J)."""
+    def membrane(self, u, dx: ufl.Measure) -> ufl.Form:
+        """``int t psi(F(u)) dA`` (J)."""
+        return self.density(u) * dx
+
+    def bending_energy(self, u, dS: ufl.Measure, q=None) -> ufl.Form:
+        """The hinge energy over the interior edges (J); with a cell test function ``q``,
+        each edge's energy shared equally by its two triangles (``q`` averaged)."""
         domain = u.function_space.mesh.ufl_domain()
         J = ufl.Jacobian(domain)
         edge_rest = FacetJacobian(domain)[:, 0]
@@ -84,8 +114,9 @@ class ShellEnergy:
         cross = ufl.cross(J[:, 0], J[:, 1])
         area = ufl.sqrt(ufl.dot(cross, cross)) / 2
         length = ufl.sqrt(ufl.dot(edge_rest("+"), edge_rest("+")))
+        weight = 1.0 if q is None else (q("+") + q("-")) / 2
         return shell_bending.hinge_density(theta, theta_rest, self.bending, length,
-                                           area("+") + area("-")) * dS
+                                           area("+") + area("-")) * weight * dS
 
     def energy(self, u, dx: ufl.Measure, dS: ufl.Measure) -> ufl.Form:
         """Membrane plus bending energy (J); the membrane alone when ``bending`` is the
@@ -93,3 +124,8 @@ class ShellEnergy:
         if isinstance(self.bending, (int, float)) and self.bending == 0:
             return self.membrane(u, dx)
         return self.membrane(u, dx) + self.bending_energy(u, dS)
+
+    def cell_energy(self, u, q, dx: ufl.Measure, dS: ufl.Measure) -> ufl.Form:
+        """Each cell's elastic energy (a vector form of the cell test function ``q``): its
+        membrane energy and half the hinge energy of each of its interior edges."""
+        return self.density(u) * q * dx + self.bending_energy(u, dS, q)
