@@ -25,7 +25,7 @@ from fem_anim.meshes.common import entities_in_box, name_body, name_group
 
 __all__ = ["TRIANGULATIONS", "build_sheet", "sheet_divisions", "structured_sheet"]
 
-#: ``triangulation`` -> gmsh's transfinite ``arrangement``.
+#: ``triangulation`` -> gmsh's transfinite ``arrangement`` (None: numpy only).
 TRIANGULATIONS = {"right": "Right", "left": "Left", "alternate": "Alternate",
                   "crossed": None}
 
@@ -86,7 +86,7 @@ def structured_sheet(size: Sequence[float], divisions: Sequence[int],
                                 ((a, b, m), (b, c, m), (c, d, m), (d, a, m))])
         return np.concatenate([points, centres]), cells.astype(np.int64)
     right = {"right": np.ones_like(i, bool), "left": np.zeros_like(i, bool),
-             "alternate": (i + j) % 2 == 0}[triangulation]
+             "alternate": (i + j) % 2 == 1}[triangulation]
     first = np.where(right[:, None], np.column_stack([a, b, c]), np.column_stack([a, b, d]))
     second = np.where(right[:, None], np.column_stack([a, c, d]), np.column_stack([b, c, d]))
     return points, np.concatenate([first, second]).astype(np.int64)
@@ -104,7 +104,7 @@ def build_sheet(model, size: Sequence[float], element_size: float,
         size: ``(size_x, size_y)`` (m).
         element_size: Target length of the squares' sides (m).
         origin: Lower corner (3 coordinates), default the coordinate origin.
-        triangulation: A key of :data:`TRIANGULATIONS`.
+        triangulation: A key of :data:`TRIANGULATIONS` but ``"crossed"``.
 
     Returns:
         The model, meshed (dimension 2).
@@ -112,9 +112,9 @@ def build_sheet(model, size: Sequence[float], element_size: float,
     Raises:
         ValueError: on a bad ``size``, ``origin`` or ``triangulation``.
     """
-    if triangulation not in TRIANGULATIONS:
-        raise ValueError(f"triangulation must be one of {sorted(TRIANGULATIONS)}, "
-                         f"got {triangulation!r}")
+    gmsh_names = [k for k, v in TRIANGULATIONS.items() if v is not None]
+    if TRIANGULATIONS.get(triangulation) is None:
+        raise ValueError(f"triangulation must be one of {gmsh_names}, got {triangulation!r}")
     nx, ny = sheet_divisions(size, element_size)
     o = _origin3(origin)
     model.add("sheet")

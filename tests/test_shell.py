@@ -357,3 +357,24 @@ def test_bad_shell_input_is_one_line_exit_2(case, tmp_path):
     assert code == 2
     assert len(err) == 1 and err[0].startswith("fem-anim: error: "), err
     assert words in err[0], err[0]
+
+
+@pytest.mark.parametrize("triangulation", ["right", "left", "alternate"])
+def test_gmsh_sheet_is_the_structured_sheet(triangulation):
+    """gmsh's transfinite sheet (what scenes use) has the numpy sheet's triangles: the same
+    vertex triples by coordinates (the bending energy depends on the triangulation)."""
+    from fem_anim.mesh.gmsh_session import gmsh_arrays, gmsh_session
+    from fem_anim.meshes import BUILDERS
+
+    cfg = {"size": [0.6, 0.4], "element_size": 0.2, "origin": [1.0, 2.0, 0.0],
+           "triangulation": triangulation}
+    with gmsh_session("sheet", "") as model:
+        points, cells, markers, names = gmsh_arrays(BUILDERS["sheet"](model, cfg), 2)
+    reference_points, reference_cells = structured_sheet([0.6, 0.4], [3, 2], [1.0, 2.0, 0.0],
+                                                         triangulation)
+
+    def triples(p, c):
+        return sorted(tuple(sorted(map(tuple, np.round(p[t, :2], 9)))) for t in c)
+
+    assert triples(points, cells) == triples(reference_points, reference_cells)
+    assert names.get("body") == 1

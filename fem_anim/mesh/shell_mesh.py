@@ -1,7 +1,7 @@
 """A shell's mid-surface as a distributed DOLFINx mesh: triangles in 3D (gdim 3, tdim 2).
 
 :func:`build_shell_mesh` makes the triangles on rank 0 from the scene's ``[mesh]`` (the
-structured sheet of :mod:`fem_anim.meshes.sheet`, or a surface file meshio reads), checks
+gmsh sheet of :mod:`fem_anim.meshes.sheet`, or a surface file meshio reads), checks
 them (:func:`check_shell_surface`: no degenerate triangle, no edge shared by more than two
 triangles, one connected piece; orientation is not needed: the bending energy orients the
 two triangles of each edge by their rest normals, :mod:`fem_anim.problem.shell_terms`) and distributes them with the
@@ -19,6 +19,7 @@ from fem_anim import compat
 from fem_anim.errors import MeshError
 from fem_anim.mesh.checks import FLAT
 from fem_anim.mesh.connectivity import check_one_body
+from fem_anim.mesh.gmsh_session import gmsh_arrays, gmsh_session
 from fem_anim.mesh.simplex import SimplexMesh
 
 __all__ = ["build_shell_mesh", "check_shell_surface", "shell_arrays"]
@@ -73,13 +74,18 @@ def shell_arrays(cfg: dict, base_dir: Path) -> tuple[np.ndarray, np.ndarray, str
     Raises:
         MeshError: if the file cannot be read or holds no triangles.
     """
-    if cfg["shape"] == "sheet":
-        from fem_anim.meshes.sheet import sheet_divisions, structured_sheet
+    if cfg["shape"] == "sheet":  # gmsh's structured sheet in the plane z = origin_z
+        from fem_anim.meshes import BUILDERS
 
-        divisions = sheet_divisions(cfg["size"], cfg["element_size"])
-        points, cells = structured_sheet(cfg["size"], divisions, cfg["origin"],
-                                         cfg["triangulation"])
-        return points, cells, f"mesh (sheet {divisions[0]} x {divisions[1]})"
+        source = "mesh (sheet)"
+        with gmsh_session(source, "is mesh.element_size too large for the sheet?") as model:
+            try:
+                model = BUILDERS["sheet"](model, cfg)
+            except ValueError as err:
+                raise MeshError(f"{source}: {err}") from None
+            points, cells, _, _ = gmsh_arrays(model, 2)
+        z = 0.0 if cfg["origin"] is None else float(cfg["origin"][2])
+        return np.column_stack([points, np.full(len(points), z)]), cells, source
     import meshio
 
     path = Path(cfg["file"])

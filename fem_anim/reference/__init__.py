@@ -14,7 +14,9 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.obstacle_barrier` - the IPC log barrier against a plane or sphere obstacle and its
   lagged friction (vertex rule);
 * :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
-* :mod:`.time_integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
+* :mod:`.time_integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1);
+* :mod:`.shell_energy` - a P1 shell's membrane and hinge-bending energies, gradients and
+  Hessians (hyper-dual numbers).
 """
 
 from fem_anim.reference.assembly import elastic_energy, elastic_gradient, elastic_hessian
@@ -57,6 +59,7 @@ from fem_anim.reference.materials import (
 from fem_anim.reference.box_mesh import box_mesh
 from fem_anim.reference.newton import ConvergenceError, minimize_newton
 from fem_anim.reference.potential import EnergyProblem, build_problem
+from fem_anim.reference.shell_energy import shell_energy, shell_gradient, shell_hessian
 
 __all__ = [
     "INTEGRATORS",
@@ -94,6 +97,9 @@ __all__ = [
     "newmark_step",
     "psi",
     "rest_shape_matrix",
+    "shell_energy",
+    "shell_gradient",
+    "shell_hessian",
     "simulate",
     "stable_neohookean_parameters",
     "symplectic_euler_step",

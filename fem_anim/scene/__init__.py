@@ -4,7 +4,8 @@
 (:func:`scene_keys`); :mod:`~fem_anim.scene.constraints` says what one key's value may be;
 :mod:`~fem_anim.scene.loading` makes a :class:`Scene` from a file, a TOML string or a dict,
 with ``--set`` overrides; :mod:`~fem_anim.scene.validation` checks it key by key and
-:mod:`~fem_anim.scene.consistency` the keys against each other; :mod:`~fem_anim.scene.modes`
+:mod:`~fem_anim.scene.consistency` the keys against each other (a shell scene's rules:
+:mod:`~fem_anim.scene.shell_rules`); :mod:`~fem_anim.scene.modes`
 holds ``solver.mode``'s named sets of solver keys. A scene is validated once, here, at the
 boundary; everything downstream reads a checked :class:`Scene`.
 """
@@ -33,4 +34,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "parse_override": "loading",
     "validate_render": "loading",
     "validate_scene": "validation",
+    "SHELL_MODELS": "shell_rules",
+    "check_shell": "shell_rules",
 })

@@ -94,7 +94,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
                     "a closed STL/OBJ/PLY surface, relative to the scene file"),
         "divisions": Key(list, None, c.divisions, V, doc="box only: a structured grid of "
                          "cells per axis, cut into simplices (instead of gmsh)"),
-        "triangulation": Key(str, "right", choices=("right", "left", "alternate", "crossed"),
+        "triangulation": Key(str, "right", choices=("right", "left", "alternate"),
                              doc="sheet: how each square is cut into triangles "
                              "(fem_anim.meshes.sheet)"),
     },
