@@ -651,6 +651,27 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell.py::test_cylinder_bending_energy_is_kirchhoff_love",
               "tests/test_shell.py::test_cantilever_plate_converges_at_first_order"),
              "the hinge stiffness calibrated for an equilateral mesh, not the sheets' squares"),
+    Mutation("shell-area-density", "fem_anim/problem/discretisation.py",
+             'mat["density"] * shell_thickness(',
+             'mat["density"] + 0 * shell_thickness(',
+             ("tests/test_shell.py::test_area_density_is_density_times_thickness",),
+             "a shell's mass per area taken as the volume density, not rho t"),
+    Mutation("shell-hessian-pattern", "fem_anim/problem/objective.py",
+             "subset=self.ipc is not None or\n",
+             "subset=self.ipc is not None and\n",
+             ("tests/test_shell.py::test_swinging_sheet_keeps_its_energy_with_newmark",),
+             "the mass matrix added to the Jacobian by the cell pattern, hinges couple more"),
+    Mutation("shell-cell-energy-ghosts", "fem_anim/problem/reported_energies.py",
+             "        energy.ghostUpdate(addv=PETSc.InsertMode.ADD, "
+             "mode=PETSc.ScatterMode.REVERSE)\n",
+             "",
+             ("tests/test_shell.py::test_two_ranks_equal_serial",),
+             "the hinge energy given to ghost cells is dropped under MPI"),
+    Mutation("shell-non-manifold-check", "fem_anim/mesh/shell_mesh.py",
+             "    if np.any(counts > 2):",
+             "    if np.any(counts > 3):",
+             ("tests/test_shell.py::test_bad_shell_input_is_one_line_exit_2",),
+             "an edge shared by three triangles is let through"),
 ]
 
 def copy_tree(dest: Path) -> None:
