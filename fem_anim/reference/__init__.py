@@ -16,7 +16,8 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
 * :mod:`.time_integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1);
 * :mod:`.shell_energy` - a P1 shell's membrane and hinge-bending energies, gradients and
-  Hessians (hyper-dual numbers).
+  Hessians (hyper-dual numbers; imported as the module, whose name its energy function
+  shares).
 """
 
 from fem_anim.reference.assembly import elastic_energy, elastic_gradient, elastic_hessian
@@ -59,7 +60,6 @@ from fem_anim.reference.materials import (
 from fem_anim.reference.box_mesh import box_mesh
 from fem_anim.reference.newton import ConvergenceError, minimize_newton
 from fem_anim.reference.potential import EnergyProblem, build_problem
-from fem_anim.reference.shell_energy import shell_energy, shell_gradient, shell_hessian
 
 __all__ = [
     "INTEGRATORS",
@@ -97,9 +97,6 @@ __all__ = [
     "newmark_step",
     "psi",
     "rest_shape_matrix",
-    "shell_energy",
-    "shell_gradient",
-    "shell_hessian",
     "simulate",
     "stable_neohookean_parameters",
     "symplectic_euler_step",
