@@ -1,6 +1,7 @@
 """Meshes: from a scene's ``[mesh]`` (gmsh builders, imported files, structured boxes) or its
 ``[[body]]`` list to one distributed DOLFINx mesh, with the checks that a mesh is usable (cell
-quality, one connected body, a closed surface), the bodies' placement and the material regions; a shell's surface in 3D.
+quality, one connected body, a closed surface), the bodies' placement and the material regions;
+a shell's surface in 3D (``shell_mesh``).
 """
 
 from fem_anim.lazy_exports import lazy_exports

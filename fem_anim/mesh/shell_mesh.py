@@ -4,8 +4,8 @@
 gmsh sheet of :mod:`fem_anim.meshes.sheet`, or a surface file meshio reads), checks
 them (:func:`check_shell_surface`: no degenerate triangle, no edge shared by more than two
 triangles, one connected piece; orientation is not needed: the bending energy orients the
-two triangles of each edge by their rest normals, :mod:`fem_anim.problem.shell_terms`) and distributes them with the
-manifold coordinate element of :func:`fem_anim.compat.create_mesh`.
+two triangles of each edge by their rest normals, :mod:`fem_anim.problem.shell_terms`) and
+distributes them with the manifold coordinate element of :func:`fem_anim.compat.create_mesh`.
 """
 
 from __future__ import annotations

@@ -617,12 +617,14 @@ MUTATIONS: list[Mutation] = [
     Mutation("shell-plane-stress-lambda", "forms/shell_membrane.py",
              "    return 2 * mu * lmbda / (lmbda + 2 * mu)",
              "    return lmbda",
-             ("tests/test_shell.py::test_patch_uniform_stretch_gives_the_analytic_stress_and_energy",),
+             ("tests/test_shell.py::"
+              "test_patch_uniform_stretch_gives_the_analytic_stress_and_energy",),
              "the membrane uses the 3D Lame lambda instead of the plane-stress one"),
     Mutation("shell-rest-frame-height", "forms/shell_membrane.py",
              "    h = ufl.sqrt(ufl.dot(b, b) - b_t1**2)",
              "    h = ufl.sqrt(ufl.dot(b, b))",
-             ("tests/test_shell.py::test_patch_uniform_stretch_gives_the_analytic_stress_and_energy",),
+             ("tests/test_shell.py::"
+              "test_patch_uniform_stretch_gives_the_analytic_stress_and_energy",),
              "D_m's second row takes the whole second edge, not its part normal to the first"),
     Mutation("shell-neohookean-log-area", "forms/shell_membrane.py",
              "    lnJ = ufl.ln(ufl.det(C)) / 2",
