@@ -23,7 +23,8 @@ import numpy as np
 
 from fem_anim.meshes.common import entities_in_box, name_body, name_group
 
-__all__ = ["TRIANGULATIONS", "build_sheet", "sheet_divisions", "structured_sheet"]
+__all__ = ["TRIANGULATIONS", "build_sheet", "sheet_divisions", "structured_sheet",
+           "structured_tube"]
 
 #: ``triangulation`` -> gmsh's transfinite ``arrangement`` (None: numpy only).
 TRIANGULATIONS = {"right": "Right", "left": "Left", "alternate": "Alternate",
@@ -90,6 +91,41 @@ def structured_sheet(size: Sequence[float], divisions: Sequence[int],
     first = np.where(right[:, None], np.column_stack([a, b, c]), np.column_stack([a, b, d]))
     second = np.where(right[:, None], np.column_stack([a, c, d]), np.column_stack([b, c, d]))
     return points, np.concatenate([first, second]).astype(np.int64)
+
+
+def structured_tube(radius: float, length: float, divisions: Sequence[int],
+                    triangulation: str = "right") -> tuple[np.ndarray, np.ndarray]:
+    """A cylindrical tube (axis x, from 0 to ``length``): the sheet of ``divisions``
+    = (along x, around) squares rolled onto the radius, its seam merged (numpy, no gmsh).
+
+    Args:
+        radius: The tube's radius (m).
+        length: Its length along x (m).
+        divisions: Squares along x and around the circumference (at least 3 around).
+        triangulation: ``"right"``, ``"left"`` or ``"alternate"`` (an even count around).
+
+    Returns:
+        ``points`` ((nx + 1) n_around, 3) and ``cells`` (2 nx n_around, 3), the normals
+        pointing outwards.
+
+    Raises:
+        ValueError: on fewer than 3 squares around, or an odd count with ``"alternate"``.
+    """
+    nx, around = (int(n) for n in divisions)
+    if around < 3 or (triangulation == "alternate" and around % 2):
+        raise ValueError(f"a tube needs at least 3 squares around (even for alternate), "
+                         f"got {around}")
+    points, cells = structured_sheet([length, 2 * np.pi * radius], [nx, around],
+                                     triangulation=triangulation)
+    angle = points[:, 1] / radius
+    rolled = np.column_stack([points[:, 0], radius * np.cos(angle), radius * np.sin(angle)])
+    i, j = np.divmod(np.arange(len(points)), around + 1)
+    seam = j == around  # the last row of vertices is the first one
+    index = np.where(seam, i * (around + 1), np.arange(len(points)))
+    keep = np.flatnonzero(~seam)
+    renumber = np.full(len(points), -1, np.int64)
+    renumber[keep] = np.arange(keep.size)
+    return rolled[keep], renumber[index[cells]]
 
 
 def build_sheet(model, size: Sequence[float], element_size: float,

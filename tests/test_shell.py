@@ -383,3 +383,34 @@ def test_gmsh_sheet_is_the_structured_sheet(triangulation):
 
     assert triples(points, cells) == triples(reference_points, reference_cells)
     assert names.get("body") == 1
+
+
+@pytest.mark.parametrize("model", ["stvk", "neohookean"])
+def test_tube_is_stress_free_at_rest_and_hoop_stretch_is_analytic(model):
+    """A tube (curved at rest: every hinge has a rest angle; the seam merged) has zero energy
+    and force at rest; scaled radially by s its hinge angles do not change (zero bending)
+    and each triangle is stretched by (1, s): energy t A psi(diag(1, s)) exactly."""
+    from fem_anim.meshes.sheet import structured_tube
+
+    radius, length, s = 0.3, 0.5, 1.2
+    points, cells = structured_tube(radius, length, [3, 8], "alternate")
+    assert len(points) == 4 * 8 and cells.max() == len(points) - 1
+    mesh, V, order = surface(points, cells)
+    u = fem.Function(V)
+    dx, dS = shell_measures(mesh)
+    shell = ShellEnergy(model, MU, LMBDA, THICKNESS, fem.Constant(mesh, PETSc.ScalarType(K)))
+    E, g, _ = assemble(shell.energy(u, dx, dS), u)
+    assert abs(E) < 1e-14 and np.abs(g).max() < 1e-12
+    scaled = points * np.array([1.0, s, s])
+    u.x.array[:] = (scaled - points).ravel()[order]
+    assert abs(fem.assemble_scalar(fem.form(shell.bending_energy(u, dS)))) < 1e-14
+    area = length * 8 * 2 * radius * np.sin(np.pi / 8)  # the polygonal tube's area
+    C = np.diag([1.0, s * s])
+    if model == "stvk":
+        G = (C - np.eye(2)) / 2
+        psi = MU * np.sum(G * G) + MU * LMBDA / (LMBDA + 2 * MU) * np.trace(G) ** 2
+    else:
+        lnJ = np.log(s)
+        psi = MU / 2 * (1 + s * s - 2) - MU * lnJ + MU * LMBDA / (LMBDA + 2 * MU) * lnJ**2
+    E = fem.assemble_scalar(fem.form(shell.membrane(u, dx)))
+    assert E == pytest.approx(THICKNESS * area * psi, rel=1e-12)
