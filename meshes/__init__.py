@@ -19,6 +19,7 @@ from collections.abc import Callable, Mapping
 from fem_anim.meshes.box import build_box
 from fem_anim.meshes.capsule import build_capsule
 from fem_anim.meshes.cylinder import build_cylinder
+from fem_anim.meshes.sheet import build_sheet, structured_sheet
 from fem_anim.meshes.sphere import build_sphere
 from fem_anim.meshes.structured import structured_box
 from fem_anim.meshes.surface import build_volume_from_surface
@@ -30,10 +31,12 @@ __all__ = [
     "build_box",
     "build_capsule",
     "build_cylinder",
+    "build_sheet",
     "build_sphere",
     "build_torus",
     "build_volume_from_surface",
     "structured_box",
+    "structured_sheet",
 ]
 
 #: Scene ``mesh.shape`` -> the ``[mesh]`` keys its builder takes (as keyword arguments).
@@ -43,10 +46,11 @@ BUILDER_KEYS: dict[str, tuple[str, ...]] = {
     "cylinder": ("radius", "length", "element_size", "origin", "dim"),
     "torus": ("radius", "minor_radius", "element_size", "origin", "dim"),
     "capsule": ("radius", "length", "element_size", "origin", "dim"),
+    "sheet": ("size", "element_size", "origin", "triangulation"),
 }
 
 _FUNCTIONS = {"box": build_box, "sphere": build_sphere, "cylinder": build_cylinder,
-              "torus": build_torus, "capsule": build_capsule}
+              "torus": build_torus, "capsule": build_capsule, "sheet": build_sheet}
 
 
 def _from_mesh_table(shape: str) -> Callable:

@@ -95,7 +95,7 @@ def test_a_dict_fails_with_the_message_of_the_file(content, tmp_path):
 
 def test_the_banana_of_the_issue():
     with pytest.raises(SceneError, match=r"^<dict>: mesh.shape must be one of box, sphere, "
-                                         r"cylinder, torus, capsule, file, got 'banana'$"):
+                                         r"cylinder, torus, capsule, file, sheet, got 'banana'$"):
         fem_anim.Scene.from_dict({"mesh": {"shape": "banana"}})
 
 

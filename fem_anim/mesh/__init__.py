@@ -1,6 +1,7 @@
 """Meshes: from a scene's ``[mesh]`` (gmsh builders, imported files, structured boxes) or its
 ``[[body]]`` list to one distributed DOLFINx mesh, with the checks that a mesh is usable (cell
-quality, one connected body, a closed surface), the bodies' placement and the material regions.
+quality, one connected body, a closed surface), the bodies' placement and the material regions;
+a shell's surface in 3D (``shell_mesh``).
 """
 
 from fem_anim.lazy_exports import lazy_exports
@@ -34,6 +35,8 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "MaterialSpec": "regions",
     "assign_materials": "regions",
     "local_cell_markers": "regions",
+    "build_shell_mesh": "shell_mesh",
+    "check_shell_surface": "shell_mesh",
     "CELL_NAMES": "simplex",
     "SimplexMesh": "simplex",
     "drop_unused_points": "simplex",

@@ -3,7 +3,8 @@
 The mesh is made on rank 0, by a gmsh builder of :mod:`fem_anim.meshes`
 (:func:`fem_anim.mesh.gmsh_session.gmsh_session`), as a structured box, or read from a file
 (:func:`fem_anim.mesh.mesh_file.read_mesh_file`); it is then checked and distributed
-(:func:`fem_anim.mesh.simplex.mesh_from_arrays`).
+(:func:`fem_anim.mesh.simplex.mesh_from_arrays`). A shell scene's surface is made by
+:func:`fem_anim.mesh.shell_mesh.build_shell_mesh`.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from mpi4py import MPI
 from fem_anim.errors import MeshError
 from fem_anim.mesh.gmsh_session import gmsh_arrays, gmsh_session
 from fem_anim.mesh.mesh_file import read_mesh_file
+from fem_anim.mesh.shell_mesh import build_shell_mesh
 from fem_anim.mesh.simplex import SimplexMesh, mesh_from_arrays
 from fem_anim.meshes.structured import structured_box
 from fem_anim.scene.schema import LENGTH_UNITS
@@ -86,6 +88,8 @@ def build_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
     Raises:
         MeshError: on every rank if the mesh cannot be made or fails :func:`check_cells`.
     """
+    if "shell" in scene.data:  # a surface in 3D (fem_anim.mesh.shell_mesh)
+        return build_shell_mesh(comm, scene)
     cfg = scene["mesh"]
     d = cfg["dim"]
     points = np.empty((0, d))

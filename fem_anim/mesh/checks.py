@@ -73,10 +73,17 @@ def cell_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
         points: ``(n, d)`` vertex coordinates.
         cells: ``(m, d + 1)`` vertex indices.
 
+    A simplex of lower dimension than the points (a triangle in 3D) has no sign: its measure
+    is ``sqrt(det(E^T E)) / k!`` with ``E`` its ``k`` edge vectors.
+
     Returns:
         ``(m,)`` signed volumes.
     """
-    return _signed_measures(points, cells) / math.factorial(cells.shape[1] - 1)
+    k = cells.shape[1] - 1
+    if k < points.shape[1]:
+        E = points[cells[:, 1:]] - points[cells[:, :1]]
+        return np.sqrt(np.linalg.det(E @ E.transpose(0, 2, 1))) / math.factorial(k)
+    return _signed_measures(points, cells) / math.factorial(k)
 
 
 def check_cells(points: np.ndarray, cells: np.ndarray, source: str) -> None:

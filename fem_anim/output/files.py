@@ -281,7 +281,7 @@ def write_final(path: Path, domain: SimplexMesh, displacement: np.ndarray | None
         return
     import meshio
 
-    cell_type = {2: "triangle", 3: "tetra"}[domain.points.shape[1]]
+    cell_type = {3: "triangle", 4: "tetra"}[domain.cells.shape[1]]
     cell_data = {"body": [body_numbers(domain.cells)]}
     if energy_density is not None:
         cell_data["energy_density"] = [energy_density]

@@ -6,8 +6,8 @@ and obstacle contact into one energy whose gradient and Hessian are taken by
 (``tangent_filter``), the pins (``pins``) and animated handles (``handles``), the matrices
 (``matrices``), the reported energies (``reported_energies``), the form compiler
 (``form_compiler``) and the assembly's log events (``events``); beside it the per-point quadrature
-data (``quadrature``), the terms assembled once (``constant_terms``) and the mixed (u, p)
-unknown (``mixed_space``).
+data (``quadrature``), the terms assembled once (``constant_terms``), the mixed (u, p)
+unknown (``mixed_space``) and a shell's membrane and bending energies (``shell_terms``).
 """
 
 from fem_anim.lazy_exports import lazy_exports
@@ -24,5 +24,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "EVENTS": "events",
     "EnergyProblem": "objective",
     "QuadratureData": "quadrature",
+    "ShellEnergy": "shell_terms",
+    "shell_measures": "shell_terms",
     "FILTERED_MODES": "tangent_filter",
 })

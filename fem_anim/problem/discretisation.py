@@ -30,6 +30,7 @@ from fem_anim.forms.material import get_material
 from fem_anim.forms.time_schemes import SCHEMES
 from fem_anim.mesh.bodies import body_regions
 from fem_anim.problem.mixed_space import MixedFields
+from fem_anim.problem.shell_terms import ShellEnergy, shell_measures, shell_thickness
 
 __all__ = ["Discretisation", "default_quadrature_degree"]
 
@@ -47,7 +48,8 @@ class Discretisation:
         (``u``, ``u_pred``, ``u_prev``, ``v``, ``u_bc``, ``u_anchor``)."""
         scene, mesh = self.scene, self.domain.mesh
         self.comm: MPI.Comm = mesh.comm
-        self.d = d = mesh.topology.dim
+        #: the displacement's dimension: the mesh's (a shell's surface: 3, its cells' 2)
+        self.d = d = mesh.geometry.dim
         degree = scene["element"]["degree"]
         self.quadrature_degree = scene["element"]["quadrature_degree"]
         if self.quadrature_degree is None:
@@ -84,7 +86,9 @@ class Discretisation:
             mu, lmbda = lame_parameters(mat["youngs_modulus"], mat["poisson_ratio"])
         self.mu = fem.Constant(mesh, PETSc.ScalarType(mu))
         self.lmbda = fem.Constant(mesh, PETSc.ScalarType(lmbda))
-        self.rho = fem.Constant(mesh, PETSc.ScalarType(mat["density"]))
+        #: a shell's rho is its area density rho t (kg/m^2; fem_anim.problem.shell_terms)
+        self.rho = fem.Constant(mesh, PETSc.ScalarType(mat["density"] * shell_thickness(
+            self.scene)))
         self.weight = fem.Constant(mesh, PETSc.ScalarType(0.0))
         self.damping_coefficient = fem.Constant(mesh, PETSc.ScalarType(0.0))
         if self.mixed:
@@ -113,3 +117,12 @@ class Discretisation:
         # in the same form as the inertia term miscompiles under FFCx 0.5 (the compiled sum
         # differs from the sum of the separately compiled terms; tests/test_mass_and_terms.py).
         self.dx_load = self.dx_mass
+        self.shell = None  # a shell's membrane and bending energy (fem_anim.problem.shell_terms)
+        if "shell" in scene.data:
+            self.shell = ShellEnergy.from_scene(scene, mesh, self.mu, self.lmbda)
+            # the membrane's integrand is constant per cell: any rule is exact, and sharing
+            # the mass measure's keeps one rule per kernel (two rules in one kernel
+            # redefine the Jacobian under FFCx 0.5)
+            _, self.dS_shell = shell_measures(mesh)
+            self.dx_shell = self.dx_mass
+            self.elastic_terms = []

@@ -215,7 +215,9 @@ class EnergyTerms:
         # other forms' JIT keys)
         q = ufl.TestFunction(self.W0)
         ufl_forms["cell_elastic"] = sum(self._psi(self.u, material=m) * q * dx
-                                        for m, dx in self.elastic_terms)
+                                        for m, dx in self.elastic_terms) \
+            if self.shell is None else self.shell.cell_energy(self.u, q, self.dx_shell,
+                                                              self.dS_shell)
         if self.mixed:
             ufl_forms["cell_elastic"] = self._mixed_energy(self.u, self.p, q)
             p_trial, p_test = ufl.split(du)[-1], ufl.split(dv)[-1]
@@ -298,7 +300,10 @@ class EnergyTerms:
         return material.psi(F, self.mu, self.lmbda, **extra)
 
     def _elastic_energy(self, u):
-        """int psi(F(u)) dX, one integral per material model in use."""
+        """int psi(F(u)) dX, one integral per material model in use (a shell's membrane and
+        bending energy)."""
+        if self.shell is not None:
+            return self.shell.energy(u, self.dx_shell, self.dS_shell)
         return sum(self._psi(u, material=m) * dx for m, dx in self.elastic_terms)
 
     def _of_unknown(self, form):

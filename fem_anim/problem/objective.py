@@ -112,7 +112,8 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         """Pins, the constant terms, the mixed preconditioner and the IPC barrier."""
         mesh, d = self.domain.mesh, self.d
         self.unknown = unknown
-        n_cells = mesh.topology.index_map(d).size_local + mesh.topology.index_map(d).num_ghosts
+        cell_map = mesh.topology.index_map(mesh.topology.dim)
+        n_cells = cell_map.size_local + cell_map.num_ghosts
         self.cell_body = local_cell_markers(self.domain) - 1 if self.bodies else \
             np.zeros(n_cells, np.int32)
         #: the pins on V (mass, initial acceleration) and on the unknown (the step): the same
@@ -396,7 +397,10 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
             self.ipc.add_hessian(A, float(self.weight.value))
         A.assemble()
         if self.constant_terms is not None:
-            self.constant_terms.add_hessian(A, subset=self.ipc is not None)
+            # contact pairs and a shell's hinges (edge-neighbour couplings) add nonzeros
+            # the mass form's pattern lacks
+            self.constant_terms.add_hessian(A, subset=self.ipc is not None or
+                                            self.shell is not None)
         if self.schur is not None:
             self.schur.update(float(self.weight.value))
         EVENTS["jacobian"].end()

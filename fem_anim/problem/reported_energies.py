@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from dolfinx.fem import petsc as fem_petsc
+from petsc4py import PETSc
 
 from fem_anim import compat
 from fem_anim.mesh.checks import cell_volumes
@@ -49,13 +50,15 @@ class ReportedEnergies:
         """
         self.u.x.array[:] = u
         self.update_quadrature_data()
-        num_owned = self.domain.mesh.topology.index_map(self.d).size_local
+        num_owned = self.domain.mesh.topology.index_map(self.domain.mesh.topology.dim).size_local
         cell_dofs = compat.cell_dofs(self.W0)[:num_owned, 0]
         if self._cell_volumes is None:
             mesh = self.domain.mesh
             self._cell_volumes = np.abs(cell_volumes(
                 mesh.geometry.x[:, : self.d], compat.geometry_dofmap(mesh)[:num_owned]))
         energy = fem_petsc.assemble_vector(self.cell_elastic_form)
+        # a shell's hinge energy, shared by an edge's two cells, also lands on ghost cells
+        energy.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         values = energy.array[cell_dofs] / self._cell_volumes
         energy.destroy()
         return values

@@ -14,7 +14,10 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.obstacle_barrier` - the IPC log barrier against a plane or sphere obstacle and its
   lagged friction (vertex rule);
 * :mod:`.newton` - Newton with Armijo backtracking (section 3.2);
-* :mod:`.time_integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1).
+* :mod:`.time_integrators` - Newmark, implicit Euler, BDF2, symplectic Euler (section 3.1);
+* :mod:`.shell_energy` - a P1 shell's membrane and hinge-bending energies, gradients and
+  Hessians (hyper-dual numbers; imported as the module, whose name its energy function
+  shares).
 """
 
 from fem_anim.reference.assembly import elastic_energy, elastic_gradient, elastic_hessian

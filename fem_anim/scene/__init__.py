@@ -5,7 +5,8 @@
 :mod:`~fem_anim.scene.loading` makes a :class:`Scene` from a file, a TOML string or a dict,
 with ``--set`` overrides; :mod:`~fem_anim.scene.validation` checks it key by key and
 :mod:`~fem_anim.scene.consistency` the keys against each other (contact settings against the
-scene's scales in :mod:`~fem_anim.scene.contact_limits`); :mod:`~fem_anim.scene.modes`
+scene's scales in :mod:`~fem_anim.scene.contact_limits`, a shell scene's rules in
+:mod:`~fem_anim.scene.shell_rules`); :mod:`~fem_anim.scene.modes`
 holds ``solver.mode``'s named sets of solver keys. A scene is validated once, here, at the
 boundary; everything downstream reads a checked :class:`Scene`.
 """
@@ -44,4 +45,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "parse_override": "loading",
     "validate_render": "loading",
     "validate_scene": "validation",
+    "SHELL_MODELS": "shell_rules",
+    "check_shell": "shell_rules",
 })

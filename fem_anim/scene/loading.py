@@ -101,7 +101,7 @@ class Scene:
             Traceback (most recent call last):
             ...
             fem_anim.errors.SceneError: <dict>: mesh.shape must be one of box, sphere, \
-cylinder, torus, capsule, file, got 'banana'
+cylinder, torus, capsule, file, sheet, got 'banana'
         """
         raw = _as_table(data, source)
         return cls._of(_validated(raw, overrides, source), source,

@@ -62,7 +62,7 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
     mixed = isinstance(element, dict) and element.get("formulation") == "mixed"
     keep_exact = mixed or solver.get("method", "newton") != "newton" or \
         solver.get("hessian_update", "every_iteration") != "every_iteration" or \
-        _several_models(raw)
+        _several_models(raw) or "shell" in raw
     if mixed:  # the saddle point needs ldlt, lu or schur (fem_anim.problem.mixed_space)
         solver.setdefault("preset", MIXED_DEFAULT_PRESET)
     for key, value in SOLVER_MODES[mode].items():

@@ -19,6 +19,7 @@ from typing import Any
 
 from fem_anim.scene import constraints as c
 from fem_anim.scene.modes import SOLVER_MODES
+from fem_anim.scene.shell_rules import shell_bending_value
 from fem_anim.solver.hessian_modification import MODES as HESSIAN_MODES
 
 __all__ = ["Key", "KeyInfo", "SCHEMA", "DEFAULTS", "SECTIONS", "OPTIONAL_SECTIONS",
@@ -31,7 +32,7 @@ MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohooke
                    "corotated_lagged", "mooney_rivlin")
 FORMULATIONS = ("displacement", "mixed")
 INTEGRATORS = ("newmark", "implicit_euler", "bdf2", "symplectic_euler")
-MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file")
+MESH_SHAPES = ("box", "sphere", "cylinder", "torus", "capsule", "file", "sheet")
 #: ``solver.hessian_update``: how often Newton's Hessian is rebuilt
 #: (:mod:`fem_anim.solver.hessian_reuse`).
 HESSIAN_UPDATES = ("every_iteration", "every_step", "lagged", "rest")
@@ -104,6 +105,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                      "scale (after units), about the origin"),
         "divisions": Key(list, None, c.divisions, V, doc="box only: a structured grid of "
                          "cells per axis, cut into simplices (instead of gmsh)"),
+        "triangulation": Key(str, "right", choices=("right", "left", "alternate"),
+                             doc="sheet: how each square is cut into triangles "
+                             "(fem_anim.meshes.sheet)"),
     },
     "element": {
         "degree": Key(int, 1, choices=(1, 2), doc="Lagrange degree of the displacement"),
@@ -212,6 +216,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
                         doc="rotation of the body's mesh about x, then y, then z (2D: one "
                         "angle)"),
     },
+    "shell": {  # a thin shell body: its mid-surface (fem_anim/problem/shell_terms.py)
+        "thickness": Key(NUM, None, c.positive, unit="m",
+                         doc="shell thickness t: energy t psi per area, area density rho t"),
+        "bending": Key((int, float, str), "derived", shell_bending_value, unit="J",
+                       doc="hinge stiffness k, 0 for a membrane, or \"derived\": from E, nu "
+                       "and the thickness (k = D / 6, D = E t^3 / (12 (1 - nu^2)))"),
+    },
     "contact": {  # contact between bodies and of a body with itself (fem_anim/contact/ipc.py)
         "self": Key(bool, True, doc="each body also repels itself"),
         "dhat": Key(NUM, 1.0e-3, c.positive, unit="m", doc="barrier activation distance"),
@@ -307,6 +318,8 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "obstacle": ("[[obstacle]]", "static obstacles with barrier contact"),
     "body": ("[[body]]", "one of several bodies, with its own [body.mesh], [body.material], "
              "[body.initial], [[body.pin]] and [[body.region]] (keys as at the top level)"),
+    "shell": ("[shell]", "a thin shell: the body is a triangle surface in 3D (mesh.shape = "
+              "\"sheet\" or a surface file), its membrane and bending energies"),
     "contact": ("[contact]", "IPC contact between surfaces (on by default with several "
                 "bodies)"),
     "solver": ("[solver]", "the minimiser of each step and its linear solver"),
@@ -314,7 +327,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "render": ("[render]", "the pictures and animations"),
 }
 #: Sections that exist only when a scene declares them (physical terms).
-OPTIONAL_SECTIONS = ("gravity", "damping", "initial", "contact")
+OPTIONAL_SECTIONS = ("gravity", "damping", "initial", "contact", "shell")
 #: Sections that are arrays of tables (``[[pin]]``, ``[[region]]``, ``[[obstacle]]``).
 ARRAY_SECTIONS = ("pin", "region", "obstacle")
 #: Sub-tables of a ``[[body]]``: the top-level sections that describe one body.
@@ -322,7 +335,7 @@ BODY_TABLES = ("mesh", "material", "initial")
 BODY_ARRAYS = ("pin", "region")
 #: Keys without a default that a declared optional section must give.
 REQUIRED = {"gravity": ("acceleration",), "pin": ("min", "max"), "region": ("name",),
-            "obstacle": ("type",), "body": ("name",)}
+            "obstacle": ("type",), "body": ("name",), "shell": ("thickness",)}
 
 DEFAULTS: dict[str, dict[str, Any]] = {
     section: {k: key.default for k, key in keys.items()}

@@ -29,12 +29,13 @@ largest rise above the initial energy, which it should never have.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 
 from fem_anim.mesh.bodies import body_pins
+from fem_anim.mesh.checks import cell_volumes
+from fem_anim.problem.shell_terms import shell_thickness
 
 __all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
            "DAMPED_THRESHOLD", "ROUNDOFF_STRAIN", "moving_pins"]
@@ -54,13 +55,10 @@ def moving_pins(scene) -> bool:
 
 
 def _volume(domain) -> float:
-    """|Omega| from the input mesh on rank 0 (simplex volumes |det(x_i - x_0)| / d!)."""
+    """|Omega| from the input mesh on rank 0 (simplex volumes; a shell's: its area)."""
     if domain.mesh.comm.rank != 0:
         return domain.mesh.comm.bcast(None, root=0)
-    x = domain.points[domain.cells]
-    edges = x[:, 1:, :] - x[:, :1, :]
-    d = edges.shape[1]
-    volume = float(np.sum(np.abs(np.linalg.det(edges))) / math.factorial(d))
+    volume = float(np.sum(np.abs(cell_volumes(domain.points, domain.cells))))
     return domain.mesh.comm.bcast(volume, root=0)
 
 
@@ -73,7 +71,8 @@ def initial_energies(sim) -> dict[str, float]:
     p.v.x.array[:] = state.v
     energies = p.energies()
     young = sim.scene["material"]["youngs_modulus"]
-    energies["roundoff"] = young * _volume(sim.domain) * ROUNDOFF_STRAIN**2
+    energies["roundoff"] = young * _volume(sim.domain) * shell_thickness(sim.scene) * \
+        ROUNDOFF_STRAIN**2
     return energies
 
 
