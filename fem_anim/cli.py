@@ -32,7 +32,7 @@ from pathlib import Path
 from fem_anim.console import OneLineParser, print_error, quiet_jit_logging
 from fem_anim.errors import (ConvergenceError, FemAnimError, Interrupted, describe_library_error,
                              describe_os_error)
-from fem_anim.export.command import add_export_parser, export_command
+from fem_anim.export.export_command import add_export_parser, export_command
 from fem_anim.petsc_options import check_cli_options, init_petsc, split_petsc_args
 
 __all__ = ["main", "build_parser"]
@@ -239,8 +239,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if app_args[:1] == ["bench"]:  # its own parser: argparse's REMAINDER drops --options
             return _bench(app_args[1:])
-        if app_args[:1] == ["fit"]:  # fem_anim.adjoint.command parses its own arguments
-            from fem_anim.adjoint.command import fit_command
+        if app_args[:1] == ["fit"]:  # fem_anim.adjoint.fit_command parses its own arguments
+            from fem_anim.adjoint.fit_command import fit_command
             return fit_command(app_args[1:], solver_options)
         args = build_parser().parse_args(app_args)
         if args.command == "solvers":

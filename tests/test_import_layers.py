@@ -103,3 +103,11 @@ def test_every_package_folder_is_installed():
     folders = {module_name(init) for folder in PACKAGES for init in folder.rglob("__init__.py")
                if "__pycache__" not in init.parts}
     assert folders == listed
+
+
+def test_no_two_modules_share_a_name():
+    """One name, one module: a file name says which module it is anywhere in the package."""
+    names = [p.name for folder in PACKAGES for p in folder.rglob("*.py")
+             if "__pycache__" not in p.parts and "data" not in p.relative_to(folder).parts
+             and p.name != "__init__.py"]
+    assert sorted({n for n in names if names.count(n) > 1}) == []

@@ -5,7 +5,7 @@
 :mod:`~fem_anim.export.usd_stage` writes a USD stage (one time-sampled mesh per body, the
 obstacles, the frame rate, through Pixar's ``usd-core``);
 :mod:`~fem_anim.export.mesh_sequence` writes OBJ or PLY files per body per frame;
-:mod:`~fem_anim.export.command` is ``fem-anim export`` and keeps to the files fem_anim owns.
+:mod:`~fem_anim.export.export_command` is ``fem-anim export`` and keeps to the files fem_anim owns.
 Public names load lazily.
 """
 
@@ -22,5 +22,5 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "write_sequence": "mesh_sequence",
     "write_obj": "mesh_sequence",
     "write_ply": "mesh_sequence",
-    "export_run": "command",
+    "export_run": "export_command",
 })
