@@ -39,6 +39,7 @@ from fem_anim.render.parallel_frames import FrameJob, frame_images, worker_count
     worker_signals
 from fem_anim.render.render_defaults import resolve_settings
 from fem_anim.render.outer_surface import outer_faces
+from fem_anim.render.png_writer import write_png
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
            "render_directory", "product_names", "REQUIRED_FILES", "MAX_GIF_FPS"]
@@ -260,7 +261,6 @@ def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
                    scene: dict | None = None) -> dict:
     """Frames, GIF, MP4 and final.png into ``staging``: the cameras planned over the run,
     the frames rendered by :func:`~fem_anim.render.parallel_frames.frame_images`."""
-    import imageio.v3 as iio
     import imageio_ffmpeg
 
     settings = resolve_settings(settings, run.cells, scene)
@@ -298,7 +298,7 @@ def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
                     video = _video_writer(staging / "animation.mp4", frame.shape, fps,
                                           imageio_ffmpeg)
                 video.send(frame)
-        iio.imwrite(staging / "final.png", image)
+        write_png(staging / "final.png", image)
         seconds = (time.perf_counter() - start) / len(order)
     finally:
         if video is not None:

@@ -100,7 +100,8 @@ class FrameRenderer:
         if bodies:  # categorical: body k takes colour k of the palette
             lo, hi = -0.5, 9.5
         actor = plotter.add_mesh(
-            _normals_filter(self.surface), scalars=label, cmap=BODY_COLORMAP if bodies else settings["colormap"],
+            _normals_filter(self.surface), scalars=label,
+            cmap=BODY_COLORMAP if bodies else settings["colormap"],
             n_colors=10 if bodies else 256, clim=(lo, hi if hi > lo else lo + 1.0),
             show_scalar_bar=width >= MIN_SCALAR_BAR_WIDTH and not bodies,
             show_edges=settings["show_edges"], ambient=0.25, diffuse=0.8, specular=0.15,

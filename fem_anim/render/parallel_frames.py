@@ -4,10 +4,11 @@ Each worker is a fork of the rendering process made before any render window exi
 it inherits the trajectory and the imported modules without pickling or importing them
 again, and opens its own off-screen plotter (:class:`~fem_anim.render.frames.FrameRenderer`)
 once. Frames go to the workers in order; each worker renders its frame, writes its PNG
-(the slow part of saving a frame) and sends the image back, and :func:`frame_images`
-yields the images in frame order, so the caller writes the GIF and the MP4 as if it had
-rendered them itself. Mesa's software rasteriser (llvmpipe) threads each frame itself;
-a worker is given its share of the CPUs (``LP_NUM_THREADS``) unless the user set it.
+(:func:`~fem_anim.render.png_writer.write_png`) and sends the image back, and
+:func:`frame_images` yields the images in frame order, so the caller writes the GIF and the
+MP4 as if it had rendered them itself. Mesa's software rasteriser (llvmpipe) threads each
+frame itself; a worker is given its share of the CPUs (``LP_NUM_THREADS``) unless the user
+set it.
 
 Workers ignore SIGINT (the parent decides what an interrupt does: it stops the pool and
 removes the staged files) and die on SIGTERM, which the pool sends them when it stops.
@@ -23,14 +24,15 @@ from typing import Iterator
 
 import numpy as np
 
-__all__ = ["FrameJob", "frame_images", "worker_count", "worker_signals", "MAX_WORKERS", "FRAMES_PER_WORKER"]
+from fem_anim.render.png_writer import write_png
+
+__all__ = ["FrameJob", "frame_images", "worker_count", "worker_signals", "MAX_WORKERS",
+           "FRAMES_PER_WORKER"]
 
 #: Worker processes at most (by default, see :func:`worker_count`).
 MAX_WORKERS = 4
 #: Fewer frames than this per worker do not pay for a worker's start.
 FRAMES_PER_WORKER = 8
-#: PNG compression level of the frames: zlib's fastest, about 4x faster than the default.
-PNG_COMPRESSION = 1
 
 
 @dataclass
@@ -81,9 +83,7 @@ def _open(job: FrameJob):
 def _render(renderer, job: FrameJob, k: int) -> np.ndarray:
     image = renderer.render(job.displacement[k], job.values[k], job.titles[k], job.shots[k])
     if job.frame_paths[k] is not None:
-        from PIL import Image
-
-        Image.fromarray(image).save(job.frame_paths[k], compress_level=PNG_COMPRESSION)
+        write_png(job.frame_paths[k], image)
     return image
 
 
