@@ -114,7 +114,10 @@ class FrameRenderer:
             rest = pv.PolyData(X, faces=self.surface.faces)
             plotter.add_mesh(rest, style="wireframe", color="grey", opacity=0.25,
                              lighting=False)
-        self.text = plotter.add_text("", position="upper_left", font_size=8, color=ink)
+        # a text actor at a pixel position: a corner annotation fits its font to the window
+        # again whenever its text changes, which costs more than rendering the frame
+        self.text = plotter.add_text(" ", position=(4, height - 4), font_size=8, color=ink)
+        self.text.GetTextProperty().SetVerticalJustificationToTop()
         self.obstacles = list(obstacles) if settings["obstacles"] else []
         centre, size = stage
         self._obstacle_actors = [
@@ -163,7 +166,7 @@ class FrameRenderer:
             for actor, shown in zip(self._obstacle_actors, visible_obstacles(
                     self.obstacles, np.asarray(shot.position), centre, self.dim)):
                 actor.SetVisibility(shown)
-        self.text.SetText(2, title)  # 2: the upper-left corner of the annotation
+        self.text.SetInput(title or " ")
         self.plotter.render()
         return self.plotter.screenshot(return_img=True)
 
