@@ -1,10 +1,13 @@
 """A saved run as pictures: PNG frames, an animated GIF, an MP4 video, ``final.png``.
 
 :func:`render_directory` reads a run directory (``trajectory.xdmf`` + ``.h5`` through
-meshio's TimeSeriesReader, ``stats.csv``), fixes the colour range and the camera over the
-whole run (the field's range over all frames, the box around all deformed positions), so
-neither colours nor framing jump between frames, renders every frame with one
-:class:`~fem_anim.render.frames.FrameRenderer` and writes
+meshio's TimeSeriesReader, ``stats.csv``, the scene from ``scene.json``), fills in the
+``[render]`` defaults that depend on the scene (:mod:`~fem_anim.render.render_defaults`),
+fixes the colour range over the whole run (the field's range over all frames) and plans
+every frame's camera from the bodies' surface in all frames
+(:func:`~fem_anim.render.camera.plan_shots`), so neither colours nor framing jump, renders
+the frames in worker processes (:mod:`~fem_anim.render.parallel_frames`) while the plots
+are drawn in another, and writes
 
 * ``frames/frame_NNNN.png`` (one per trajectory frame, the rest state first),
 * ``animation.gif`` (Pillow, one palette; at most 50 frames per second, since GIF delays

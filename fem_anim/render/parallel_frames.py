@@ -134,8 +134,14 @@ def frame_images(job: FrameJob, order: list[int], workers: int) -> Iterator[np.n
     _job = job  # inherited by the forked workers
     try:
         context = multiprocessing.get_context("fork")
-        with context.Pool(workers, initializer=_start_worker,
-                          initargs=(max(1, cpus // workers),)) as pool:
+        pool = context.Pool(workers, initializer=_start_worker,
+                            initargs=(max(1, cpus // workers),))
+        try:
             yield from pool.imap(_work, order)
+        except BaseException:
+            pool.terminate()  # an interrupt or an error: stop the workers now
+            raise
+        pool.close()  # done: let the workers exit on their own
+        pool.join()
     finally:
         _job = None
