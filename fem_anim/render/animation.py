@@ -37,7 +37,7 @@ from fem_anim.errors import FemAnimError
 from fem_anim.output.products import staged_products
 from fem_anim.output.rundir import read_manifest
 from fem_anim.render.camera import plan_shots
-from fem_anim.render.frames import body_labels, stage_of
+from fem_anim.render.frames import body_labels, scalar_bar_reserve, stage_of
 from fem_anim.render.parallel_frames import FrameJob, frame_images, worker_count, \
     worker_signals
 from fem_anim.render.render_defaults import resolve_settings
@@ -285,7 +285,7 @@ def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
                    run.displacement, values,
                    [f"{name}   frame {k}/{last}   t = {run.times[k]:.3f} s"
                     for k in range(last + 1)],
-                   plan_shots(surfaces, settings, d),
+                   plan_shots(surfaces, settings, d, scalar_bar_reserve(settings)),
                    [staging / "frames" / _frame_name(k, last) if "frames" in outputs
                     else None for k in range(last + 1)])
     workers = worker_count(settings, len(order))

@@ -133,7 +133,8 @@ def _box_centre(points: np.ndarray) -> np.ndarray:
     return 0.5 * (points.min(axis=0) + points.max(axis=0))
 
 
-def plan_shots(frames: list[np.ndarray], settings: dict, dim: int) -> list[Shot]:
+def plan_shots(frames: list[np.ndarray], settings: dict, dim: int, reserve: float = 0.0
+               ) -> list[Shot]:
     """The camera of every frame.
 
     Args:
@@ -142,6 +143,9 @@ def plan_shots(frames: list[np.ndarray], settings: dict, dim: int) -> list[Shot]
         settings: The ``[render]`` table: ``camera``, ``view``, ``camera_position``,
             ``focal_point``, ``view_up``, ``fov``, ``window_size``.
         dim: 2 or 3 (``view = "auto"`` is ``side`` in 3D, ``xy`` in 2D).
+        reserve: Share of the picture's height kept free at the bottom (for a scalar bar):
+            the bodies are fitted into the rest, by a view angle ``1 - reserve`` times as
+            tall, and the camera looks that much lower.
 
     Returns:
         One :class:`Shot` per frame (the same one unless ``camera = "follow"``).
@@ -163,8 +167,16 @@ def plan_shots(frames: list[np.ndarray], settings: dict, dim: int) -> list[Shot]
         view = "side" if dim == 3 else "xy"
     axes = view_axes(*VIEWS[view])
     d, _, up = axes
+    t = math.tan(math.radians(fov) / 2.0)
+    fit_fov = math.degrees(2.0 * math.atan((1.0 - reserve) * t))
+    fit_aspect = aspect / (1.0 - reserve)
+
+    def lowered(focal: np.ndarray, D: float) -> np.ndarray:
+        return focal - reserve * t * D * up
+
     if mode == "fit_bodies":
-        focal, D = fit_distance(every, _box_centre(every), axes, fov, aspect)
+        focal, D = fit_distance(every, _box_centre(every), axes, fit_fov, fit_aspect)
+        focal = lowered(focal, D)
         shot = Shot(tuple(focal + D * d), tuple(focal), tuple(up), fov)
         return [shot] * len(frames)
     centres = np.array([_box_centre(x) for x in frames])
@@ -176,6 +188,7 @@ def plan_shots(frames: list[np.ndarray], settings: dict, dim: int) -> list[Shot]
                               for i in range(3)])
     # the smoothed centre stays the focal point (centring each frame would bring the jitter
     # back); one distance, the largest any frame needs about it
-    D = max(fit_distance(x, c, axes, fov, aspect, centre=False)[1]
+    D = max(fit_distance(x, c, axes, fit_fov, fit_aspect, centre=False)[1]
             for x, c in zip(frames, smooth))
-    return [Shot(tuple(c + D * d), tuple(c), tuple(up), fov) for c in smooth]
+    focals = [lowered(c, D) for c in smooth]
+    return [Shot(tuple(f + D * d), tuple(f), tuple(up), fov) for f in focals]

@@ -28,8 +28,8 @@ from fem_anim.render.scenery import OBSTACLE_COLOR, add_lights, obstacle_mesh, \
     visible_obstacles
 from fem_anim.render.outer_surface import outer_faces
 
-__all__ = ["FrameRenderer", "FIELD_LABELS", "CREASE_ANGLE", "body_labels", "render_frame",
-           "render_vtu", "stage_of"]
+__all__ = ["FrameRenderer", "FIELD_LABELS", "CREASE_ANGLE", "SCALAR_BAR_HEIGHT", "body_labels",
+           "render_frame", "render_vtu", "scalar_bar_reserve", "stage_of"]
 
 #: Scalar bar titles of the fields ``render.color_by`` names.
 FIELD_LABELS = {"displacement": "displacement (m)", "energy_density": "psi (J/m^3)",
@@ -40,6 +40,8 @@ BODY_COLORMAP = "tab10"
 CREASE_ANGLE = 60.0
 #: Narrower pictures have no scalar bar (its labels would cover the body).
 MIN_SCALAR_BAR_WIDTH = 240
+#: Share of the picture's height kept for the scalar bar, its labels and title, at the bottom.
+SCALAR_BAR_HEIGHT = 0.2
 
 
 def _pyvista():
@@ -175,6 +177,19 @@ class FrameRenderer:
         self.plotter.close()
 
 
+def scalar_bar_reserve(settings: dict) -> float:
+    """The share of the picture's height the scalar bar takes at the bottom (0 without one).
+
+    Args:
+        settings: The resolved ``[render]`` table.
+
+    Returns:
+        :data:`SCALAR_BAR_HEIGHT` if a scalar bar is drawn, else 0.
+    """
+    shown = settings["window_size"][0] >= MIN_SCALAR_BAR_WIDTH and settings["color_by"] != "body"
+    return SCALAR_BAR_HEIGHT if shown else 0.0
+
+
 def _normals_filter(surface):
     """VTK's normals filter on ``surface``: smooth vertex normals, split at edges sharper than
     :data:`CREASE_ANGLE` (a box keeps its edges); it runs again whenever ``surface`` is
@@ -249,7 +264,7 @@ def render_frame(path: Path, points: np.ndarray, cells: np.ndarray, displacement
     renderer = FrameRenderer(points, cells, settings, (0.0, float(values.max())),
                              stage_of([x]), (scene or {}).get("obstacle") or [])
     try:
-        shot = plan_shots([x], settings, d)[0]
+        shot = plan_shots([x], settings, d, scalar_bar_reserve(settings))[0]
         iio.imwrite(path, renderer.render(displacement[:, :d], values, title, shot))
     finally:
         renderer.close()
