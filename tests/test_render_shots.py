@@ -121,6 +121,8 @@ def test_follow_keeps_a_travelling_body_the_same_size():
     follow = plan_shots(frames, settings | {"camera": "follow"}, 3)
     fixed = plan_shots(frames, settings | {"camera": "fit_bodies"}, 3)
     assert len(set(fixed)) == 1
+    assert plan_shots(frames, settings, 3) == follow  # the default for a body travelling far
+    assert len(set(plan_shots(frames[:2], settings, 3))) == 1  # not for one moving 1 size
     aspect = 400 / 300
     sizes = []
     for x, shot in zip(frames, follow):

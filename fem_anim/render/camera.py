@@ -15,7 +15,7 @@ The three ``render.camera`` modes:
   frames (obstacles are not fitted: a ground plane does not shrink the bodies);
 * ``follow``: the focal point follows the centre of the bodies' box, smoothed over a few
   frames, at one distance (the largest any frame needs), so a body rolling away stays the
-  same size in the picture;
+  same size in the picture (the default when the bodies travel far, :func:`camera_mode`);
 * ``fixed``: ``render.camera_position``, ``render.focal_point`` (default: the bodies'
   centre over the run) and ``render.view_up``.
 """
@@ -44,6 +44,8 @@ VIEWS = {
 MARGIN = 0.08
 #: Frames over which ``follow`` averages the bodies' centre (an odd number).
 FOLLOW_WINDOW = 9
+#: Default ``follow`` when the bodies travel further than this many times their size.
+FOLLOW_TRAVEL = 2.0
 
 
 @dataclass(frozen=True)
@@ -56,18 +58,31 @@ class Shot:
     view_angle: float
 
 
-def camera_mode(settings: dict) -> str:
-    """``render.camera``, or its default: ``fixed`` with a camera position, else ``fit_bodies``.
+def camera_mode(settings: dict, frames: list[np.ndarray] | None = None) -> str:
+    """``render.camera``, or its default.
+
+    The default is ``fixed`` with a ``render.camera_position``; otherwise ``follow`` when the
+    centre of the bodies' box travels further than :data:`FOLLOW_TRAVEL` times their largest
+    size in any frame (a body thrown or rolling away: one camera for the whole path would
+    make it small), else ``fit_bodies``.
 
     Args:
         settings: The ``[render]`` table.
+        frames: The bodies' surface positions per frame (needed for the default).
 
     Returns:
         One of :data:`CAMERA_MODES`.
     """
     if settings.get("camera"):
         return settings["camera"]
-    return "fixed" if settings.get("camera_position") is not None else "fit_bodies"
+    if settings.get("camera_position") is not None:
+        return "fixed"
+    if not frames:
+        return "fit_bodies"
+    centres = np.array([_box_centre(x) for x in frames])
+    size = max(float(np.max(np.ptp(x, axis=0))) for x in frames)
+    travel = float(np.max(np.ptp(centres, axis=0)))
+    return "follow" if travel > FOLLOW_TRAVEL * size else "fit_bodies"
 
 
 def view_axes(direction, up) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -150,7 +165,7 @@ def plan_shots(frames: list[np.ndarray], settings: dict, dim: int, reserve: floa
     Returns:
         One :class:`Shot` per frame (the same one unless ``camera = "follow"``).
     """
-    mode = camera_mode(settings)
+    mode = camera_mode(settings, frames)
     fov = float(settings.get("fov") or 30.0)
     width, height = settings["window_size"]
     aspect = width / height

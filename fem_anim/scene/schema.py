@@ -258,7 +258,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "camera": Key(str, None, choices=CAMERA_MODES,
                       doc="fit_bodies: one camera framing the bodies over the run; follow: "
                       "tracks them at a fixed distance; fixed: camera_position (default: "
-                      "fixed with a camera_position, else fit_bodies)"),
+                      "fixed with a camera_position, follow for bodies travelling over twice "
+                      "their size, else fit_bodies)"),
         "fov": Key(NUM, 30.0, c.in_open(0.0, 180.0), unit="deg",
                    doc="the camera's vertical view angle"),
         "camera_position": Key(list, None, None, (3,), unit="m", doc="an explicit camera "
