@@ -1,10 +1,13 @@
 """A saved run as pictures: PNG frames, an animated GIF, an MP4 video, ``final.png``.
 
 :func:`render_directory` reads a run directory (``trajectory.xdmf`` + ``.h5`` through
-meshio's TimeSeriesReader, ``stats.csv``), fixes the colour range and the camera over the
-whole run (the field's range over all frames, the box around all deformed positions), so
-neither colours nor framing jump between frames, renders every frame with one
-:class:`~fem_anim.render.frames.FrameRenderer` and writes
+meshio's TimeSeriesReader, ``stats.csv``, the scene from ``scene.json``), fills in the
+``[render]`` defaults that depend on the scene (:mod:`~fem_anim.render.render_defaults`),
+fixes the colour range over the whole run (the field's range over all frames) and plans
+every frame's camera from the bodies' surface in all frames
+(:func:`~fem_anim.render.camera.plan_shots`), so neither colours nor framing jump, renders
+the frames in worker processes (:mod:`~fem_anim.render.parallel_frames`) while the plots
+are drawn in another, and writes
 
 * ``frames/frame_NNNN.png`` (one per trajectory frame, the rest state first),
 * ``animation.gif`` (Pillow, one palette; at most 50 frames per second, since GIF delays
@@ -24,6 +27,7 @@ from __future__ import annotations
 
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +36,13 @@ import numpy as np
 from fem_anim.errors import FemAnimError
 from fem_anim.output.products import staged_products
 from fem_anim.output.rundir import read_manifest
-from fem_anim.render.frames import FrameRenderer, body_labels
+from fem_anim.render.camera import plan_shots
+from fem_anim.render.frames import body_labels, scalar_bar_reserve, stage_of
+from fem_anim.render.parallel_frames import FrameJob, frame_images, worker_count, \
+    worker_signals
+from fem_anim.render.render_defaults import resolve_settings
+from fem_anim.render.outer_surface import outer_faces
+from fem_anim.render.png_writer import write_png
 
 __all__ = ["RunFrames", "check_run_directory", "read_run", "frame_values", "gif_stride",
            "render_directory", "product_names", "REQUIRED_FILES", "MAX_GIF_FPS"]
@@ -216,55 +226,73 @@ def render_directory(path: Path, settings: dict) -> dict:
     run = read_run(path)
     names = product_names(run, settings)
     with staged_products(path, names, replaces=_replaced(path, names)) as staging:
-        made = _render_frames(run, settings, staging, _run_name(path), _obstacles(path))
-        write_plots(path / "stats.csv", staging)
+        with _beside(write_plots, path / "stats.csv", staging):
+            made = _render_frames(run, settings, staging, _run_name(path), _scene(path))
     print(f"rendered {made['frames']} frames ({made['seconds_per_frame']:.3f} s per frame, "
-          f"{made['size']} pixels, {made['fps']:.4g} frames/s) into {path}", flush=True)
+          f"{made['workers']} processes, {made['size']} pixels, {made['fps']:.4g} frames/s) "
+          f"into {path}", flush=True)
     return made
 
 
-def _bounds(run: RunFrames) -> np.ndarray:
-    """(xmin, xmax, ymin, ymax, zmin, zmax) around the rest shape and every frame's."""
-    x = np.concatenate([run.points[None], run.points[None] + run.displacement])
-    x = x.reshape(-1, x.shape[2])
-    bounds = np.ravel(np.column_stack([x.min(axis=0), x.max(axis=0)]))
-    return np.concatenate([bounds, np.zeros(6 - bounds.size)])
+@contextmanager
+def _beside(function, *args):
+    """Run ``function(*args)`` in a forked process while the block runs; at its end wait for
+    it and raise its exception, if any, here."""
+    import concurrent.futures
+    import multiprocessing
+
+    with concurrent.futures.ProcessPoolExecutor(
+            1, mp_context=multiprocessing.get_context("fork"),
+            initializer=worker_signals) as pool:
+        future = pool.submit(function, *args)
+        yield
+        future.result()
 
 
-def _obstacles(path: Path) -> list[dict]:
-    """The run's ``[[obstacle]]`` tables (from ``scene.json``; none if it cannot be read)."""
+def _scene(path: Path) -> dict | None:
+    """The run's scene table (from ``scene.json``; ``None`` if it cannot be read)."""
     import json
 
     try:
-        return list(json.loads((path / "scene.json").read_text())["scene"]["obstacle"])
+        scene = json.loads((path / "scene.json").read_text())["scene"]
     except (OSError, ValueError, KeyError, TypeError):
-        return []
+        return None
+    return scene if isinstance(scene, dict) else None
 
 
 def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
-                   obstacles: list[dict] = ()) -> dict:
-    """Frames, GIF, MP4 and final.png into ``staging``, one renderer for all frames."""
-    import imageio.v3 as iio
+                   scene: dict | None = None) -> dict:
+    """Frames, GIF, MP4 and final.png into ``staging``: the cameras planned over the run,
+    the frames rendered by :func:`~fem_anim.render.parallel_frames.frame_images`."""
     import imageio_ffmpeg
 
+    settings = resolve_settings(settings, run.cells, scene)
     values = frame_values(run, settings["color_by"])
     clim = (min(0.0, float(values.min())), float(values.max()))
     fps = _frame_rate(settings, run.times)
     stride = gif_stride(fps)
     outputs = set(settings["outputs"])
     last = run.times.size - 1
-    order = range(last + 1) if outputs else [last]  # no outputs: final.png only
+    order = list(range(last + 1)) if outputs else [last]  # no outputs: final.png only
     if "frames" in outputs:
         (staging / "frames").mkdir()
-    renderer = FrameRenderer(run.points, run.cells, settings, clim, _bounds(run), obstacles)
+    d = run.points.shape[1]
+    used = np.unique(outer_faces(run.points, run.cells)[0])
+    surfaces = [np.hstack([run.points[used] + u[used], np.zeros((used.size, 3 - d))])
+                for u in run.displacement]
+    obstacles = list((scene or {}).get("obstacle") or [])
+    job = FrameJob(run.points, run.cells, settings, clim, stage_of(surfaces), obstacles,
+                   run.displacement, values,
+                   [f"{name}   frame {k}/{last}   t = {run.times[k]:.3f} s"
+                    for k in range(last + 1)],
+                   plan_shots(surfaces, settings, d, scalar_bar_reserve(settings)),
+                   [staging / "frames" / _frame_name(k, last) if "frames" in outputs
+                    else None for k in range(last + 1)])
+    workers = worker_count(settings, len(order))
     video, gif = None, []
     start = time.perf_counter()
     try:
-        for k in order:
-            image = renderer.render(run.displacement[k], values[k],
-                                    f"{name}  t = {run.times[k]:.3f} s")
-            if "frames" in outputs:
-                iio.imwrite(staging / "frames" / _frame_name(k, last), image)
+        for k, image in zip(order, frame_images(job, order, workers)):
             if "gif" in outputs and k % stride == 0:
                 gif.append(image)
             if "mp4" in outputs:
@@ -273,16 +301,16 @@ def _render_frames(run: RunFrames, settings: dict, staging: Path, name: str,
                     video = _video_writer(staging / "animation.mp4", frame.shape, fps,
                                           imageio_ffmpeg)
                 video.send(frame)
-        iio.imwrite(staging / "final.png", image)
+        write_png(staging / "final.png", image)
         seconds = (time.perf_counter() - start) / len(order)
     finally:
-        renderer.close()
         if video is not None:
             video.close()
     if gif:
         _write_gif(staging / "animation.gif", gif, 1000.0 * stride / fps)
     return {"frames": len(order), "seconds_per_frame": seconds, "fps": fps,
-            "gif_frames": len(gif), "size": f"{image.shape[1]}x{image.shape[0]}"}
+            "gif_frames": len(gif), "size": f"{image.shape[1]}x{image.shape[0]}",
+            "workers": workers}
 
 
 def _write_gif(path: Path, images: list[np.ndarray], duration_ms: float) -> None:

@@ -342,12 +342,19 @@ def _check_obstacle(i: int, obstacle: dict[str, Any], d: int) -> None:
 
 
 def check_render(render: dict[str, Any]) -> None:
-    """A camera given by position: the focal point and up vector need it, and differ from it.
+    """A camera given by position (``render.camera = "fixed"``): the focal point and up vector
+    need it, and differ from it.
 
     Raises:
         SceneError: naming the ``render`` keys.
     """
     position = render["camera_position"]
+    camera = render.get("camera")
+    if camera == "fixed" and position is None:
+        raise SceneError('render.camera = "fixed" needs render.camera_position')
+    if camera not in (None, "fixed") and position is not None:
+        raise SceneError(f'render.camera_position needs render.camera = "fixed", got '
+                         f'"{camera}"')
     for key in ("focal_point", "view_up"):
         if render[key] is not None and position is None:
             raise SceneError(f"render.{key} needs render.camera_position (or use render.view)")

@@ -26,7 +26,7 @@ __all__ = ["Key", "KeyInfo", "SCHEMA", "DEFAULTS", "SECTIONS", "OPTIONAL_SECTION
            "ARRAY_SECTIONS", "BODY_TABLES", "BODY_ARRAYS", "REQUIRED", "NUM", "scene_keys",
            "type_text", "MATERIAL_MODELS", "FORMULATIONS", "INTEGRATORS", "MESH_SHAPES",
            "HESSIAN_UPDATES", "NONLINEAR_METHODS", "OBSTACLE_TYPES", "COLOR_FIELDS", "VIEWS",
-           "RENDER_OUTPUTS", "SURFACE_FILLS", "LENGTH_UNITS"]
+           "CAMERA_MODES", "RENDER_OUTPUTS", "SURFACE_FILLS", "LENGTH_UNITS"]
 
 MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
                    "corotated_lagged", "mooney_rivlin")
@@ -47,6 +47,8 @@ LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "km": 1000.0, "in": 0.0254, "
 COLOR_FIELDS = ("displacement", "energy_density", "body")
 #: Named camera views (``auto``: ``side`` in 3D, ``xy`` in 2D; :mod:`fem_anim.render.frames`).
 VIEWS = ("auto", "side", "iso", "xy", "xz", "yz")
+#: What ``render.camera`` may name (:mod:`fem_anim.render.camera`).
+CAMERA_MODES = ("fit_bodies", "follow", "fixed")
 #: What ``render.outputs`` may list: PNG frames, an animated GIF, an MP4 video.
 RENDER_OUTPUTS = ("frames", "gif", "mp4")
 
@@ -282,11 +284,18 @@ SCHEMA: dict[str, dict[str, Key]] = {
                    "fem_anim.export) when the run ends"),
     },
     "render": {
-        "color_by": Key(str, "displacement", choices=COLOR_FIELDS,
+        "color_by": Key(str, None, choices=COLOR_FIELDS,
                         doc="colour by |u|, by the cells' energy density, or one colour per "
-                        "body"),
+                        "body (default: body with several bodies, else displacement)"),
         "colormap": Key(str, "viridis", c.colormap, doc="a matplotlib colormap name"),
         "view": Key(str, "auto", choices=VIEWS, doc="camera direction, fitted to the run"),
+        "camera": Key(str, None, choices=CAMERA_MODES,
+                      doc="fit_bodies: one camera framing the bodies over the run; follow: "
+                      "tracks them at a fixed distance; fixed: camera_position (default: "
+                      "fixed with a camera_position, follow for bodies travelling over twice "
+                      "their size, else fit_bodies)"),
+        "fov": Key(NUM, 30.0, c.in_open(0.0, 180.0), unit="deg",
+                   doc="the camera's vertical view angle"),
         "camera_position": Key(list, None, None, (3,), unit="m", doc="an explicit camera "
                                "position"),
         "focal_point": Key(list, None, None, (3,), unit="m",
@@ -300,7 +309,16 @@ SCHEMA: dict[str, dict[str, Key]] = {
                    doc="GIF and MP4 frame rate (default: real time, within 1..60)"),
         "outputs": Key(list, list(RENDER_OUTPUTS), c.distinct_names(RENDER_OUTPUTS),
                        doc="which animations to write ([]: final.png and plots only)"),
-        "show_edges": Key(bool, True, doc="draw the cell edges"),
+        "show_edges": Key(bool, None, doc="draw the surface's cell edges (default: with "
+                          "pins, else not)"),
+        "ghost": Key(bool, None, doc="draw the rest shape as a grey wireframe (default: with "
+                     "pins, where the rest shape is the reference of the deflection)"),
+        "obstacles": Key(bool, True, doc="draw the obstacles (planes as tiles under the "
+                         "bodies; never one between camera and bodies)"),
+        "shadows": Key(bool, False, doc="cast shadows from the key light (VTK shadow maps: "
+                       "about twice the time per frame)"),
+        "workers": Key(int, None, c.at_least_one, doc="processes rendering frames side by "
+                       "side (default: the CPUs available, at most 4)"),
     },
 }
 #: How each table is written in TOML, and what it is, one line.

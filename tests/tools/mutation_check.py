@@ -880,7 +880,30 @@ MUTATIONS: list[Mutation] = [
              "    if np.any(counts > 3):",
              ("tests/test_shell.py::test_bad_shell_input_is_one_line_exit_2",),
              "an edge shared by three triangles is let through"),
+    # -- shot-ready pictures: camera fit, wall culling, outward surface, scene defaults -------
+    Mutation("shot-fit-width-tangent", "fem_anim/render/camera.py",
+             "z + np.abs(x) / tx, z + np.abs(y) / ty)",
+             "z + np.abs(x) * tx, z + np.abs(y) / ty)",
+             ("tests/test_render_shots.py::test_follow_keeps_a_travelling_body_the_same_size",
+              "tests/test_render_shots.py::test_camera_fills_the_picture_with_the_bodies"),
+             "the camera's distance from the picture's width is wrong: bodies leave the picture"),
+    Mutation("shot-wall-never-culled", "fem_anim/render/scenery.py",
+             "shown.append(np.dot(camera - point, normal) * np.dot(centre - point, normal) >= 0)",
+             "shown.append(True)",
+             ("tests/test_render_shots.py::test_a_wall_between_camera_and_bodies_is_not_drawn",),
+             "a wall between camera and bodies is drawn over them"),
+    Mutation("shot-faces-inward", "fem_anim/render/outer_surface.py",
+             "np.cross(b - a, c - a), x[opposite] - a) > 0",
+             "np.cross(b - a, c - a), x[opposite] - a) < 0",
+             ("tests/test_render_shots.py::test_outer_faces_point_outwards",),
+             "boundary triangles wound inwards (lit from behind)"),
+    Mutation("shot-ghost-always", "fem_anim/render/render_defaults.py",
+             "            resolved[key] = held",
+             "            resolved[key] = True",
+             ("tests/test_render_shots.py::test_defaults_by_scene_kind",),
+             "the rest-shape ghost and edges drawn for free bodies too"),
 ]
+
 
 def copy_tree(dest: Path) -> None:
     """Copy the repository's working files (tracked + untracked, not ignored) into ``dest``.
