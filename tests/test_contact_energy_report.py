@@ -109,12 +109,12 @@ initial = {{ velocity = [-0.5, -0.3, 0] }}
 @pytest.mark.slow  # ~20 s of CPU (60 Newton iterations with 45-50 contact pairs)
 def test_reported_ipc_energy_is_ipctks_barrier_of_the_written_positions(tmp_path):
     """Between bodies: kappa B(x) by ipctk itself on a surface taken from the written
-    tetrahedra (:func:`fem_anim.contact.intersection.boundary_triangles`), at the frames'
+    tetrahedra (:func:`fem_anim.contact.intersection.surface_collision_mesh`), at the frames'
     positions: the step's lagged friction potential is not in it. (The obstacle test above
     is the default run's variant of this check.)"""
     import ipctk
 
-    from fem_anim.contact.intersection import boundary_triangles
+    from fem_anim.contact.intersection import surface_collision_mesh
 
     kappa = 1e5
     path = tmp_path / "cubes.toml"
@@ -126,13 +126,8 @@ def test_reported_ipc_energy_is_ipctks_barrier_of_the_written_positions(tmp_path
         points, cells = reader.read_points_cells()
         frames = [reader.read_data(k)[1]["displacement"] for k in range(reader.num_steps)]
     tets = next(c.data for c in cells if c.type == "tetra")
-    F = boundary_triangles(tets)
-    used = np.unique(F)
-    index = np.full(points.shape[0], -1)
-    index[used] = np.arange(used.size)
-    F = np.asfortranarray(index[F], dtype=np.int32)
-    rest = np.asfortranarray(points[used])
-    mesh = ipctk.CollisionMesh(rest, np.asfortranarray(ipctk.edges(F), dtype=np.int32), F)
+    mesh, used = surface_collision_mesh(points, tets)
+    rest = mesh.rest_positions
     barrier = ipctk.BarrierPotential(0.005, 1.0, True)
     active = 0
     for k, row in enumerate(rows, 1):

@@ -13,6 +13,7 @@ from fem_anim.lazy_exports import lazy_exports
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "boundary_triangles": "intersection",
     "crossed_frames": "intersection",
+    "surface_collision_mesh": "intersection",
     "IPCContact": "ipc",
     "KEEP_FRACTION": "obstacles",
     "ObstacleContact": "obstacles",

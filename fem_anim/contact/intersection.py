@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["boundary_triangles", "crossed_frames"]
+__all__ = ["boundary_triangles", "crossed_frames", "surface_collision_mesh"]
 
 
 def boundary_triangles(cells: np.ndarray) -> np.ndarray:
@@ -41,12 +41,29 @@ def crossed_frames(points: np.ndarray, cells: np.ndarray, frames) -> list[int]:
     """
     import ipctk
 
+    mesh, used = surface_collision_mesh(points, cells)
+    rest = mesh.rest_positions
+    return [k for k, u in enumerate(frames)
+            if ipctk.has_intersections(mesh, np.asfortranarray(rest + u[used]))]
+
+
+def surface_collision_mesh(points: np.ndarray, cells: np.ndarray):
+    """An ipctk ``CollisionMesh`` of the tetrahedra's boundary triangles alone.
+
+    Args:
+        points: The rest positions of the vertices, (vertices, 3).
+        cells: The tetrahedra, (cells, 4) vertex indices.
+
+    Returns:
+        The collision mesh (its vertices the surface vertices, at rest) and ``used``, the
+        indices of those vertices among ``points`` (``x[used]`` are its positions).
+    """
+    import ipctk
+
     F = boundary_triangles(cells)
     used = np.unique(F)
     index = np.full(points.shape[0], -1)
     index[used] = np.arange(used.size)
     F = np.asfortranarray(index[F], dtype=np.int32)
     rest = np.asfortranarray(points[used])
-    mesh = ipctk.CollisionMesh(rest, np.asfortranarray(ipctk.edges(F), dtype=np.int32), F)
-    return [k for k, u in enumerate(frames)
-            if ipctk.has_intersections(mesh, np.asfortranarray(rest + u[used]))]
+    return ipctk.CollisionMesh(rest, np.asfortranarray(ipctk.edges(F), dtype=np.int32), F), used
