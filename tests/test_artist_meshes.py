@@ -78,7 +78,7 @@ def test_broken_surface_becomes_a_simulated_body(tmp_path):
         "name": "holed", "mesh": {"shape": "file", "file": str(DATA / "sphere_with_hole.obj"),
                                   "element_size": 0.05},
         "material": {"youngs_modulus": 5.0e4},
-        "time": {"dt": 1 / 48, "steps": 4}, "output": {"render": False},
+        "time": {"dt": 1 / 48, "steps": 4}, "output": {"render": False, "fps": 24},
         "gravity": {"acceleration": [0.0, 0.0, -9.81]},
         "initial": {"velocity": [0.5, 0.0, -1.0]},
         "obstacle": [{"type": "plane", "point": [0.0, 0.0, -0.11], "normal": [0, 0, 1]}]})

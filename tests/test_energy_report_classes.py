@@ -92,13 +92,6 @@ def test_a_turning_handle_is_a_moving_pin(tmp_path):
     assert not report["conservative"] and not report["flagged"]
 
 
-def test_friction_under_newmark_is_named(tmp_path):
-    report = energy_report(rows(GAIN), INITIAL, scene(tmp_path, "friction", "newmark"))
-    assert report["friction_newmark"] and report["gained"]
-    report = energy_report(rows(GAIN), INITIAL, scene(tmp_path, "friction"))
-    assert not report["friction_newmark"]
-
-
 def test_below_the_threshold_nothing_is_flagged(tmp_path):
     for drift in (SMALL, -SMALL):
         report = energy_report(rows(drift), INITIAL, scene(tmp_path, "conservative"))

@@ -252,7 +252,7 @@ def test_bad_surfaces_are_rejected_before_gmsh(tmp_path, defect):
         check_surface(points, triangles, "surface")
     path = write_surface(tmp_path / f"{defect}.stl", points, triangles)
     with pytest.raises(MeshError, match=f"mesh file {path}: " + SURFACE_MESSAGES[defect]):
-        build(scene_with('mesh.shape="file"', f'mesh.file="{path}"'))
+        build(scene_with('mesh.shape="file"', f'mesh.file="{path}"', 'mesh.fill="gmsh"'))
 
 
 def test_closed_surface_needs_no_consistent_orientation(tmp_path):
@@ -269,7 +269,7 @@ def test_self_intersecting_surface_is_a_gmsh_error_naming_the_file(tmp_path):
     points[7] = [-0.1, 0.1, 0.1]  # the corner (0.2, 0.2, 0.2) pushed through the cube
     path = write_surface(tmp_path / "folded.stl", points, triangles)
     with pytest.raises(MeshError, match=f"mesh file {path}: gmsh failed: .*intersect"):
-        build(scene_with('mesh.shape="file"', f'mesh.file="{path}"'))
+        build(scene_with('mesh.shape="file"', f'mesh.file="{path}"', 'mesh.fill="gmsh"'))
 
 
 @pytest.mark.parametrize("content, suffix, message", [
@@ -418,7 +418,8 @@ def test_bad_mesh_file_via_cli_exits_2_with_one_line(tmp_path, name, content, me
         path.write_bytes(content)
     out = tmp_path / "out"
     r = subprocess.run(fem_anim_command() + ["run", "-o", str(out), "-q", "--set",
-                                             'mesh.shape="file"', "--set", f'mesh.file="{path}"'],
+                                             'mesh.shape="file"', "--set", f'mesh.file="{path}"',
+                                             "--set", 'mesh.fill="gmsh"'],
                        check=False, cwd=tmp_path, capture_output=True, text=True, timeout=300,
                        env=clean_environment())
     assert r.returncode == 2, r.stderr

@@ -502,8 +502,7 @@ def test_newmark_is_never_told_to_use_newmark():
     from fem_anim.scene import load_scene
 
     report = {"drift": -0.2, "max_excursion": 0.2, "exchanged_energy": 1.0,
-              "conservative": True, "damped": True, "gained": False, "flagged": True,
-              "friction_newmark": False}
+              "conservative": True, "damped": True, "gained": False, "flagged": True}
     for integrator in ("newmark", "implicit_euler"):
         scene = load_scene(None, [f"time.integrator={integrator}"])
         line = describe_energy(report, scene)

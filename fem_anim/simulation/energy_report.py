@@ -92,9 +92,7 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         scene conserves energy: no damping, friction or moving pin), ``damped`` (a
         conservative scene that lost more than :data:`DAMPED_THRESHOLD` of the exchanged
         energy), ``gained`` (a scene without moving pins that gained as much: damping and
-        friction only dissipate), ``flagged`` (either) and ``friction_newmark`` (lagged
-        friction under the trapezoidal rule, which does not keep the energy at impacts:
-        see the module docstring).
+        friction only dissipate) and ``flagged`` (either).
         ``unconverged_steps`` lists the steps kept at the round-off floor of the objective
         without meeting their stopping test (``snes_reason`` =
         :data:`fem_anim.solver.stopping.POLISH_FAILED_REASON`); ``budget_steps`` those accepted
@@ -127,7 +125,6 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
             "moving_pins": moving, "stored_energy": _stored(rows[-1] if rows else initial),
             "conservative": conservative,
             "damped": damped, "gained": gained, "flagged": damped or gained,
-            "friction_newmark": friction and scene["time"]["integrator"] == "newmark",
             "unconverged_steps": [int(r["step"]) for r in rows
                                   if r.get("snes_reason") == POLISH_FAILED_REASON],
             "budget_steps": [int(r["step"]) for r in rows
