@@ -6,8 +6,8 @@ meshio's TimeSeriesReader, ``stats.csv``, the scene from ``scene.json``), fills 
 fixes the colour range over the whole run (the field's range over all frames) and plans
 every frame's camera from the bodies' surface in all frames
 (:func:`~fem_anim.render.camera.plan_shots`), so neither colours nor framing jump, renders
-the frames in worker processes (:mod:`~fem_anim.render.parallel_frames`) while the plots
-are drawn in another, and writes
+the frames in worker processes (:mod:`~fem_anim.render.parallel_frames`) after drawing the
+plots, and writes
 
 * ``frames/frame_NNNN.png`` (one per trajectory frame, the rest state first),
 * ``animation.gif`` (Pillow, one palette; at most 50 frames per second, since GIF delays
@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,8 +37,7 @@ from fem_anim.output.products import staged_products
 from fem_anim.output.rundir import read_manifest
 from fem_anim.render.camera import plan_shots
 from fem_anim.render.frames import body_labels, scalar_bar_reserve, stage_of
-from fem_anim.render.parallel_frames import FrameJob, frame_images, worker_count, \
-    worker_signals
+from fem_anim.render.parallel_frames import FrameJob, frame_images, worker_count
 from fem_anim.render.render_defaults import resolve_settings
 from fem_anim.render.outer_surface import outer_faces
 from fem_anim.render.png_writer import write_png
@@ -226,27 +224,14 @@ def render_directory(path: Path, settings: dict) -> dict:
     run = read_run(path)
     names = product_names(run, settings)
     with staged_products(path, names, replaces=_replaced(path, names)) as staging:
-        with _beside(write_plots, path / "stats.csv", staging):
-            made = _render_frames(run, settings, staging, _run_name(path), _scene(path))
+        # the plots in this process, not beside the frames: a process still writing them
+        # could outlive an interrupt's clean-up of the staging folder
+        write_plots(path / "stats.csv", staging)
+        made = _render_frames(run, settings, staging, _run_name(path), _scene(path))
     print(f"rendered {made['frames']} frames ({made['seconds_per_frame']:.3f} s per frame, "
           f"{made['workers']} processes, {made['size']} pixels, {made['fps']:.4g} frames/s) "
           f"into {path}", flush=True)
     return made
-
-
-@contextmanager
-def _beside(function, *args):
-    """Run ``function(*args)`` in a forked process while the block runs; at its end wait for
-    it and raise its exception, if any, here."""
-    import concurrent.futures
-    import multiprocessing
-
-    with concurrent.futures.ProcessPoolExecutor(
-            1, mp_context=multiprocessing.get_context("fork"),
-            initializer=worker_signals) as pool:
-        future = pool.submit(function, *args)
-        yield
-        future.result()
 
 
 def _scene(path: Path) -> dict | None:
