@@ -26,13 +26,7 @@ import numpy as np
 
 from fem_anim.render.png_writer import write_png
 
-__all__ = ["FrameJob", "frame_images", "worker_count", "worker_signals", "MAX_WORKERS",
-           "FRAMES_PER_WORKER"]
-
-#: Worker processes at most (by default, see :func:`worker_count`).
-MAX_WORKERS = 4
-#: Fewer frames than this per worker do not pay for a worker's start.
-FRAMES_PER_WORKER = 8
+__all__ = ["FrameJob", "frame_images", "worker_count", "worker_signals"]
 
 
 @dataclass
@@ -53,8 +47,10 @@ class FrameJob:
 
 
 def worker_count(settings: dict, frames: int) -> int:
-    """``render.workers``, or the CPUs this process may use (at most :data:`MAX_WORKERS`),
-    no more than one per :data:`FRAMES_PER_WORKER` frames.
+    """``render.workers`` (no more than the frames), else 1: the calling process alone.
+
+    Several workers are opt-in: on Python 3.13 (Debian 13) a render process interrupted while
+    its forked workers rendered was seen to hang with them instead of exiting.
 
     Args:
         settings: The ``[render]`` table.
@@ -65,8 +61,7 @@ def worker_count(settings: dict, frames: int) -> int:
     """
     if settings.get("workers"):
         return max(1, min(int(settings["workers"]), frames))
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, min(cpus or 1, MAX_WORKERS, frames // FRAMES_PER_WORKER))
+    return 1
 
 
 _job: FrameJob | None = None

@@ -318,7 +318,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "shadows": Key(bool, False, doc="cast shadows from the key light (VTK shadow maps: "
                        "about twice the time per frame)"),
         "workers": Key(int, None, c.at_least_one, doc="processes rendering frames side by "
-                       "side (default: the CPUs available, at most 4)"),
+                       "side (default 1: the render process alone)"),
     },
 }
 #: How each table is written in TOML, and what it is, one line.
