@@ -124,7 +124,8 @@ def test_gradient_with_a_moving_handle(integrator):
     obj = objective()
     theta = model.parameters.values()
     _, grad = model.evaluate(theta, obj)
-    np.testing.assert_allclose(grad, central_differences(model, obj, theta), rtol=1e-6)
+    fd = central_differences(model, obj, theta)  # components 1e6 below the largest are at
+    np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())  # FD noise
 
 
 @pytest.mark.parametrize("model_name", ["stable_neohookean", "stvk"])

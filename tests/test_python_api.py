@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fem_anim import compat
+
 import fem_anim
 from scenes import to_toml
 
@@ -200,6 +202,8 @@ print(root.level, [h.level for h in root.handlers],
 """
 
 
+@pytest.mark.skipif(not compat.LEGACY, reason="FFCx 0.9's JIT logged no build_ext line here, "
+                    "even when asked (measured on Debian 13): nothing to quiet")
 @pytest.mark.parametrize("asked", [False, True])
 def test_the_jit_is_quiet_unless_asked(asked, tmp_path):
     cache = tmp_path / "cache"  # a fresh FFCx cache: every form is really compiled

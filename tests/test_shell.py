@@ -23,6 +23,10 @@ from fem_anim.meshes.sheet import structured_sheet
 from fem_anim.problem.shell_terms import ShellEnergy, shell_measures
 from fem_anim.reference import shell_energy as reference
 
+#: Shells are verified on DOLFINx 0.5.2 only (on 0.9.0 a two-rank run hung); elsewhere a shell
+#: scene is refused with one line (tests/test_shell_stack.py).
+pytestmark = pytest.mark.skipif(not compat.LEGACY, reason="shells run on DOLFINx 0.5 only")
+
 MU, LMBDA, THICKNESS, K = 3.0, 2.0, 0.1, 0.7
 
 
