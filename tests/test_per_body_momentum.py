@@ -47,7 +47,7 @@ def body_table(k: int) -> str:
     rotation = f"rotation = {ROTATION}\n" if k == 1 else ""
     return (f'[[body]]\nname = "b{k}"\noffset = {OFFSETS[k]}\n{rotation}'
             f"mesh = {{ shape = \"box\", size = {SIZES[k]}, divisions = [2, 2, 2], "
-            f"origin = {list(-size / 2)} }}\n"
+            f"origin = {[float(v) for v in -size / 2]} }}\n"
             f"material = {{ youngs_modulus = 1e5, density = {DENSITY[k]} }}\n"
             f"initial = {{ {initial} }}\n")
 
