@@ -434,6 +434,54 @@ def _current_form(form: ufl.Form, ufcx_form, module, code, mesh):
     return fem.Form(cpp_form, ufcx_form, code, module)
 
 
+#: Paths of the FFCx locks (``<cache>/<module>.c``) this process took; see
+#: :func:`jit_locks_released`.
+_OWN_JIT_LOCKS: set[str] = set()
+
+
+def _lock_path(cache_dir, module_name: str) -> Path:
+    return Path(cache_dir).expanduser().resolve().joinpath(module_name).with_suffix(".c")
+
+
+def _get_cached_module_recording(module_name, object_names, cache_dir, timeout):
+    """FFCx's ``get_cached_module`` that records the locks this process takes, and first
+    restores the lock of a module left ready without one.
+
+    FFCx treats ``<module>.c`` as the lock and ``<module>.c.cached`` as "ready". A module
+    with ``.c.cached`` but no ``.c`` (its lock renamed by someone else while it compiled) is
+    poisoned for good: every later compile takes the free lock, compiles, then fails to create
+    the existing ``.c.cached`` (``FileExistsError``) and renames the lock again. The module's
+    library is complete (it is written before ``.c.cached``), so the lock is put back and
+    FFCx loads it.
+
+    A lock that did not exist before the call and exists after it raised (a signal landing
+    after FFCx created it) is taken as this process's: another process creating the same lock
+    in those microseconds is not ruled out, and would see its lock renamed as after a failure.
+    """
+    lock = _lock_path(cache_dir, module_name)
+    if lock.with_suffix(".c.cached").exists() and not lock.exists():
+        try:
+            open(lock, "x").close()
+        except OSError:
+            pass
+    existed = lock.exists()
+    try:
+        obj, module = _FFCX_GET_CACHED_MODULE(module_name, object_names, cache_dir, timeout)
+    except BaseException:
+        if not existed and lock.exists():
+            _OWN_JIT_LOCKS.add(str(lock))
+        raise
+    if obj is None:
+        _OWN_JIT_LOCKS.add(str(lock))
+    return obj, module
+
+
+_FFCX_GET_CACHED_MODULE = ffcx.codegeneration.jit.get_cached_module
+# ``compile_forms``/``compile_expressions`` look the name up at each call, so every compile of
+# this process (fem_anim's, DOLFINx's ``fem.form``, ``Expression``) goes through the recorder.
+ffcx.codegeneration.jit.get_cached_module = _get_cached_module_recording
+
+
 @contextmanager
 def jit_locks_released(jit_options: dict | None = None):
     """Release the JIT-cache locks that a compile interrupted inside this block leaves.
@@ -445,20 +493,23 @@ def jit_locks_released(jit_options: dict | None = None):
     :class:`~fem_anim.errors.Interrupted` landing there), leaves it, and every later compile
     of that module waits ``timeout`` seconds and fails ("JIT compilation timed out"). When
     the block ends with any exception, the locks made since it began that have no
-    ``.c.cached`` are renamed as FFCx does (one FFCx already renamed is gone).
+    ``.c.cached`` and that this process took are renamed as FFCx does (one FFCx already
+    renamed is gone). Locks of other processes are left alone, even if made since: one of
+    them may be compiling still, and renaming its lock poisons its module (see
+    :func:`_get_cached_module_recording`).
 
     Args:
         jit_options: FFCx JIT options (their ``cache_dir`` is searched).
     """
     options = jit.get_parameters(jit_options) if LEGACY else jit.get_options(jit_options)
-    cache = Path(str(options["cache_dir"])).expanduser()
+    cache = Path(str(options["cache_dir"])).expanduser().resolve()
     since = time.time() - 1.0
     try:
         yield
     except BaseException:
         for lock in cache.glob("libffcx_*.c"):
             try:
-                if lock.stat().st_mtime >= since and \
+                if str(lock) in _OWN_JIT_LOCKS and lock.stat().st_mtime >= since and \
                         not lock.with_suffix(".c.cached").exists():
                     os.replace(lock, lock.with_suffix(".c.failed"))
             except OSError:

@@ -555,8 +555,12 @@ def test_an_interruption_between_ffcx_lock_and_compile_leaves_no_lock(tmp_path):
     """The race behind a rare failure of the test below (SIGTERM, machine loaded): FFCx creates
     its lock ``<module>.c`` and only then enters the ``try`` that renames it on an Exception;
     a signal's Interrupted (an Exception) raised in between left the lock, and every later
-    compile of that module timed out. Reproduced deterministically: a lock made inside the
-    block, then Interrupted; a finished module (``.c.cached``) and an older lock stay."""
+    compile of that module timed out. Reproduced deterministically: a lock taken inside the
+    block through FFCx's own ``get_cached_module``, then Interrupted. A finished module
+    (``.c.cached``), an older lock, and a lock another process made meanwhile (it may still be
+    compiling: renaming it would poison its module) stay."""
+    import ffcx.codegeneration.jit as ffcx_jit
+
     from fem_anim import compat
     from fem_anim.errors import Interrupted
 
@@ -566,15 +570,44 @@ def test_an_interruption_between_ffcx_lock_and_compile_leaves_no_lock(tmp_path):
     old.touch()
     os.utime(old, (time.time() - 3600, time.time() - 3600))  # another run's, long ago
     done = cache / "libffcx_forms_done.c"
+    other = cache / "libffcx_forms_other.c"
     with pytest.raises(Interrupted):
         with compat.jit_locks_released({"cache_dir": str(cache)}):
-            open(cache / "libffcx_forms_new.c", "x").close()  # FFCx's get_cached_module
+            assert ffcx_jit.get_cached_module("libffcx_forms_new", [], cache, 1) == (None, None)
+            open(other, "x").close()  # another process's get_cached_module, still compiling
             done.touch()
             done.with_suffix(".c.cached").touch()
             raise Interrupted("interrupted by SIGTERM while setting up", signal.SIGTERM)
     assert not (cache / "libffcx_forms_new.c").exists()
     assert (cache / "libffcx_forms_new.c.failed").exists()
-    assert done.exists() and old.exists()
+    assert done.exists() and old.exists() and other.exists()
+
+
+def test_a_module_ready_without_its_lock_loads_instead_of_failing(tmp_path):
+    """A module whose lock was renamed while it compiled ends with ``.c.cached`` and no ``.c``:
+    FFCx alone then recompiles it and fails on the existing ``.c.cached``
+    (``FileExistsError``, seen on Debian 13's CI), every time. The lock is put back and the
+    ready module loads."""
+    import ufl
+    from dolfinx import fem, mesh
+    from mpi4py import MPI
+
+    from fem_anim import compat
+
+    cache = tmp_path / "cache"
+    domain = mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
+    functional = ufl.SpatialCoordinate(domain)[0] * ufl.dx(domain=domain)
+
+    def compile_once():
+        return compat.compile_forms_together({"b": functional}, {"cache_dir": str(cache)})
+
+    compile_once()
+    lock, = cache.glob("libffcx_forms_*.c")
+    assert lock.with_suffix(".c.cached").exists()
+    lock.unlink()  # renamed away by another process while this module compiled
+    form = compile_once()["b"]
+    assert lock.exists()
+    assert abs(fem.assemble_scalar(form) - 0.5) < 1e-12
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

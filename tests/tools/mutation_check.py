@@ -902,6 +902,17 @@ MUTATIONS: list[Mutation] = [
              "            resolved[key] = True",
              ("tests/test_render_shots.py::test_defaults_by_scene_kind",),
              "the rest-shape ghost and edges drawn for free bodies too"),
+    Mutation("jit-lock-of-others-renamed", "fem_anim/compat.py",
+             "if str(lock) in _OWN_JIT_LOCKS and lock.stat()", "if lock.stat()",
+             ("tests/test_safety.py::"
+              "test_an_interruption_between_ffcx_lock_and_compile_leaves_no_lock",),
+             "an interrupted run renames the lock of another process's compile (poisons it)"),
+    Mutation("jit-poisoned-module-not-repaired", "fem_anim/compat.py",
+             '    if lock.with_suffix(".c.cached").exists() and not lock.exists():',
+             '    if False:',
+             ("tests/test_safety.py::"
+              "test_a_module_ready_without_its_lock_loads_instead_of_failing",),
+             "a module ready without its lock recompiles and fails on .c.cached"),
 ]
 
 
