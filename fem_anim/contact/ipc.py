@@ -15,11 +15,15 @@ of the line search is kept on the collision-free part of the Newton segment by i
 continuous collision detection (:meth:`IPCContact.step_bound`): no accepted state has an
 intersection.
 
-ipctk is serial: this module is its one MPI wrapper. The surface vertices (P1
-dofs on the exterior facets) are numbered by their global dof block, in order, so each
-rank owns a contiguous run of them; each evaluation gathers their positions x = X + u to
-rank 0, which builds the collision set and evaluates there, then broadcasts scalars and
-sends each rank the gradient entries and Hessian rows it owns. The Hessian is
+ipctk is serial: this module is its MPI wrapper, with the distribution in
+:mod:`fem_anim.contact.distribution`. The surface vertices (P1 dofs on the exterior facets)
+are numbered by their global dof block. No rank gathers the surface: each rank builds the
+collision set of a local mesh (its own facets and a halo of nearby remote facets, rebuilt
+when a vertex has moved past the halo's margin), evaluates the pairs whose lowest vertex it
+owns, sends gradient rows and Hessian rows of remote vertices to their owners, and the
+energy, the minimum distance, the pair count and the CCD step bound are reduced over all
+ranks (the adaptive stiffness from reduced dot products), so every rank holds the same
+scalars. On one rank this is the serial computation to the last digit. The Hessian is
 projected to PSD per pair (IPC's projection) and dropped on pinned dofs (they are
 Dirichlet rows). Its pattern couples dofs the elastic sparsity does not: the matrix
 accepts new nonzeros (``NEW_NONZERO_ALLOCATION_ERR`` off), which PETSc keeps from then
@@ -50,9 +54,16 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import compat
+from fem_anim.contact.distribution import SurfacePartition, owned_collisions, surface_labels
 from fem_anim.errors import SceneError
 
-__all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "narrow_phase_ccd"]
+__all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "HALO_MARGIN",
+           "narrow_phase_ccd"]
+
+#: The halo's margin m in units of the longest surface edge L: a halo of radius
+#: d_hat + (3 + 8 m/L) L is rebuilt once a surface vertex has moved more than m
+#: (:mod:`fem_anim.contact.distribution`).
+HALO_MARGIN = 0.25
 
 #: Tight inclusion's precision of the time of impact (ipctk's default).
 CCD_TOLERANCE = 1.0e-6
@@ -98,7 +109,7 @@ class IPCContact:
         self.gdim = g = mesh.geometry.dim
         tdim = mesh.topology.dim
         index_map = V.dofmap.index_map
-        n_owned = index_map.size_local
+        self.n_owned = n_owned = index_map.size_local
         mesh.topology.create_connectivity(tdim - 1, tdim)
         mesh.topology.create_connectivity(tdim - 1, 0)
         mesh.topology.create_connectivity(tdim, 0)
@@ -111,27 +122,19 @@ class IPCContact:
         f_to_c = mesh.topology.connectivity(tdim - 1, tdim)
         local_faces = vertex_dof[f_to_v[facets]]
         faces = index_map.local_to_global(local_faces.ravel().astype(np.int32)).reshape(
-            -1, tdim)
-        face_body = cell_body[f_to_c.array[f_to_c.offsets[facets]]]
-        start = index_map.local_range[0]
-        ranges = np.asarray(self.comm.allgather(index_map.local_range[1]))
-        gathered = self.comm.gather((faces, face_body), root=0)
-        owned_lists = None
-        if self.comm.rank == 0:
-            faces = np.concatenate([f for f, _ in gathered])
-            self.face_body = np.concatenate([b for _, b in gathered])
-            self.surface = np.unique(faces)  # global blocks, ascending: collision numbering
-            self.faces = np.searchsorted(self.surface, faces).astype(np.int32)
-            self.counts = np.diff(np.searchsorted(self.surface, np.r_[0, ranges]))
-            owned_lists = np.split(self.surface, np.cumsum(self.counts)[:-1])
-        self.blocks = (self.comm.scatter(owned_lists, root=0) - start).astype(np.int64)
-        assert np.all(self.blocks < n_owned)
-        X = V.tabulate_dof_coordinates()[self.blocks, :g]
+            -1, tdim).astype(np.int64)
+        face_body = cell_body[f_to_c.array[f_to_c.offsets[facets]]].astype(np.int64)
+        X = V.tabulate_dof_coordinates()[:, :g]
         is_pinned = np.zeros(V.dofmap.index_map_bs * (n_owned + index_map.num_ghosts), bool)
         is_pinned[pinned] = True
-        free = ~is_pinned.reshape(-1, g)[self.blocks]
-        rest, free = self._gather(X), self._gather(free.astype(float))
-        self.timers = {"detection_s": 0.0, "barrier_s": 0.0, "ccd_s": 0.0}
+        free = ~is_pinned.reshape(-1, g)[local_faces]
+        labels = surface_labels(self.comm, faces) if not cfg["self"] else \
+            np.zeros_like(faces)
+        start, end = index_map.local_range
+        self.part = SurfacePartition(self.comm, faces, X[local_faces], free, face_body,
+                                     labels.astype(np.int64), X[:n_owned], start, end,
+                                     bool(cfg["self"]))
+        self.timers = {"detection_s": 0.0, "barrier_s": 0.0, "ccd_s": 0.0, "exchange_s": 0.0}
         # adaptive: 0 until the first step sets it (initial energies: no pair between bodies)
         self.kappa = float(cfg["stiffness"]) if cfg["stiffness"] != "adaptive" else 0.0
         self.kappa_floor = 0.0
@@ -141,66 +144,83 @@ class IPCContact:
         self._distance = np.inf
         #: IPC's per-pair projection of the Hessian (NONE: the exact Hessian, for tests)
         self.projection = ipctk.PSDProjectionMethod.CLAMP
-        self.friction = None  # the step's lagged friction potential (rank 0), if any
+        self.friction = None  # the step's lagged friction potential, if any
         self._x = None
-        self.num_pairs = 0
-        if self.comm.rank == 0:
-            self.free = free.ravel() > 0.5
-            edges = ipctk.edges(self.faces) if tdim == 3 else self.faces
-            F = self.faces if tdim == 3 else np.empty((0, 3), np.int32)
-            self.mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges, np.int32),
-                                            np.asfortranarray(F, np.int32))
-            if not cfg["self"]:
-                self.mesh.can_collide = ipctk.make_connected_components_filter(F)
-            self.potential = ipctk.BarrierPotential(self.dhat, 1.0, True)
-            self.ccd = narrow_phase_ccd()
-            self.collisions = ipctk.NormalCollisions()
-            self.collisions.use_area_weighting = True
-            self.diagonal = float(np.linalg.norm(np.ptp(rest, axis=0)))
-            self.vertex_body = np.zeros(rest.shape[0], np.int64)
-            self.vertex_body[self.faces.ravel()] = np.repeat(self.face_body, tdim)
-        error = self._check_rest(rest, body_names) if self.comm.rank == 0 else None
-        error = self.comm.bcast(error, root=0)
+        self._drift = 0.0
+        self.potential = ipctk.BarrierPotential(self.dhat, 1.0, True)
+        self.ccd = narrow_phase_ccd()
+        self.collisions = ipctk.NormalCollisions()  # this rank's (distribution.owned_collisions)
+        self.collisions.use_area_weighting = True
+        rest = self.part.owned_rest
+        lo, hi = np.min(rest, axis=0, initial=np.inf), np.max(rest, axis=0, initial=-np.inf)
+        self.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+        self.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+        self.diagonal = float(np.linalg.norm(hi - lo))
+        self.halo = self._build_halo()
+        error = self._check_rest(body_names)
         if error:
             raise SceneError(error)
 
-    # -- the MPI seam -------------------------------------------------------------------------
-    def _gather(self, local: np.ndarray) -> np.ndarray | None:
-        """Rows of the owned surface vertices, stacked on rank 0 in collision order."""
-        parts = self.comm.gather(np.ascontiguousarray(local, dtype=float), root=0)
-        return np.concatenate(parts) if self.comm.rank == 0 else None
+    # -- the MPI seam (fem_anim.contact.distribution) ---------------------------------------
+    def _u_owned(self) -> np.ndarray:
+        return self.u.x.array.reshape(-1, self.gdim)[: self.n_owned]
 
-    def _scatter(self, rows: np.ndarray | None) -> np.ndarray:
-        """Rank 0's per-vertex rows back to the ranks owning the vertices."""
-        parts = np.split(rows, np.cumsum(self.counts)[:-1]) if self.comm.rank == 0 else None
-        return self.comm.scatter(parts, root=0)
+    def _build_halo(self, reach=None):
+        """This rank's facets and the halo (collective; :mod:`fem_anim.contact.distribution`).
 
-    def positions(self, values: np.ndarray | None = None) -> np.ndarray | None:
-        """Surface vertex rows gathered to rank 0, in collision order (collective).
+        Default reach: d_hat + 3 L + 8 m with the margin m = :data:`HALO_MARGIN` L, kept
+        while no surface vertex moves more than m.
+        """
+        start = time.perf_counter()
+        if reach is None:
+            reach = lambda L: self.dhat + (3.0 + 8.0 * HALO_MARGIN) * L  # noqa: E731
+        halo = self.part.build(self._u_owned(), reach)
+        halo.margin = HALO_MARGIN * halo.longest
+        self.timers["exchange_s"] += time.perf_counter() - start
+        return halo
 
-        Args:
-            values: A local dof array to gather instead of the positions (no X added);
-                None for the current positions x = X + u.
+    @property
+    def num_pairs(self) -> int:
+        """The number of collisions of the whole surface at the last evaluation (collective)."""
+        return self.comm.allreduce(len(self.collisions))
+
+    def _update(self) -> np.ndarray:
+        """Fetch this rank's x and rebuild the halo (when x drifted past its margin) and the
+        collision set (when x changed) (collective).
 
         Returns:
-            The (surface vertices, gdim) array on rank 0; None on the other ranks.
+            The positions of the local mesh's vertices.
         """
-        if values is None:
-            u = self.u.x.array.reshape(-1, self.gdim)[self.blocks]
-            x = self._gather(u)
-            return None if x is None else self.mesh.rest_positions + x
-        return self._gather(values.reshape(-1, self.gdim)[self.blocks])
-
-    def _update(self) -> np.ndarray | None:
-        """Gather x and rebuild the collision set when x changed (collective)."""
         start = time.perf_counter()
-        x = self.positions()
-        if self.comm.rank == 0 and (self._x is None or not np.array_equal(x, self._x)):
-            self.collisions.build(self.mesh, x, self.dhat)
+        x = self.halo.positions(self._u_owned())
+        self._drift = self.halo.drift(x)
+        if self._drift > self.halo.margin:
+            self.halo = self._build_halo()
+            x, self._x, self._drift = self.halo.x_built, None, 0.0
+        self.timers["exchange_s"] += time.perf_counter() - start
+        start = time.perf_counter()
+        if self._x is None or not np.array_equal(x, self._x):
+            every = ipctk.NormalCollisions()
+            every.use_area_weighting = True
+            every.build(self.halo.mesh, x, self.dhat)
+            self.collisions = owned_collisions(self.halo, every)
             self._x = x
-            self.num_pairs = len(self.collisions)
         self.timers["detection_s"] += time.perf_counter() - start
         return x
+
+    def _friction_positions(self, x: np.ndarray) -> np.ndarray:
+        """Positions on the mesh the friction was lagged on (collective)."""
+        if self._friction_halo is self.halo:
+            return x
+        return self._friction_halo.positions(self._u_owned())
+
+    def _to_global(self, halo, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
+        """Triplets of a local mesh's dofs, free rows and columns only, as global dofs."""
+        g = self.gdim
+        keep = halo.free[rows] & halo.free[cols]
+        rows, cols, vals = rows[keep], cols[keep], vals[keep]
+        return (halo.vertices[rows // g] * g + rows % g,
+                halo.vertices[cols // g] * g + cols % g, vals)
 
     # -- energy, gradient, Hessian -------------------------------------------------------------
     def energy(self, friction: bool = True) -> float:
@@ -214,13 +234,31 @@ class IPCContact:
         """
         x = self._update()
         start = time.perf_counter()
-        value = None
-        if self.comm.rank == 0:
-            value = self.kappa * self.potential(self.collisions, self.mesh, x)
-            if friction and self.friction is not None:
-                value += self.friction(self.tangential, self.mesh, x - self._x_lagged)
+        value = self.kappa * self.potential(self.collisions, self.halo.mesh, x)
+        if friction and self.friction is not None:
+            xf = self._friction_positions(x)
+            value += self.friction(self.tangential, self._friction_halo.mesh,
+                                   xf - self._x_lagged)
+        value = self.comm.allreduce(value)
         self.timers["barrier_s"] += time.perf_counter() - start
-        return self.comm.bcast(value, root=0)
+        return value
+
+    def _gradient_rows(self, x: np.ndarray, scale: float, friction: bool) -> np.ndarray:
+        """scale (kappa grad B (+ grad D)) on the owned dof blocks (collective)."""
+        g = self.gdim
+        owned = np.zeros((self.n_owned, g))
+        grad = (scale * self.kappa) * self.potential.gradient(self.collisions, self.halo.mesh,
+                                                              x)
+        if friction and self.friction is not None:
+            xf = self._friction_positions(x)
+            dgrad = scale * self.friction.gradient(self.tangential, self._friction_halo.mesh,
+                                                   xf - self._x_lagged)
+            if self._friction_halo is self.halo:
+                grad += dgrad
+            else:
+                self._friction_halo.to_owners(dgrad.reshape(-1, g), owned)
+        self.halo.to_owners(grad.reshape(-1, g), owned)
+        return owned
 
     def add_gradient(self, b: PETSc.Vec, scale: float) -> None:
         """Add ``scale`` kappa grad B(x) (+ grad D) to ``b`` on the owned surface dofs (collective).
@@ -231,23 +269,16 @@ class IPCContact:
         """
         x = self._update()
         start = time.perf_counter()
-        grad = None
-        if self.comm.rank == 0:
-            grad = (scale * self.kappa) * self.potential.gradient(
-                self.collisions, self.mesh, x)
-            if self.friction is not None:
-                grad += scale * self.friction.gradient(self.tangential, self.mesh,
-                                                       x - self._x_lagged)
-            grad = grad.reshape(-1, self.gdim)
-        mine = self._scatter(grad)
+        rows = self._gradient_rows(x, scale, True)
         values = b.array.reshape(-1, self.gdim)
-        values[self.blocks] += mine
+        values[self.part.blocks] += rows[self.part.blocks]
         self.timers["barrier_s"] += time.perf_counter() - start
 
     def add_hessian(self, A: PETSc.Mat, scale: float) -> None:
         """Add ``scale`` kappa Hess B(x)^+ (per-pair PSD projection) to ``A`` (collective).
 
-        Rows and columns of pinned dofs are left out. Call before ``A.assemble()``.
+        Rows and columns of pinned dofs are left out; each rank computes the Hessian of the
+        pairs it owns and sends every row to the rank owning it. Call before ``A.assemble()``.
 
         Args:
             A: The Hessian matrix; it must accept new nonzeros.
@@ -255,24 +286,27 @@ class IPCContact:
         """
         x = self._update()
         start = time.perf_counter()
-        parts = None
-        if self.comm.rank == 0:
-            H = self.kappa * self.potential.hessian(self.collisions, self.mesh, x,
-                                                    self.projection)
-            if self.friction is not None:
-                H = H + self.friction.hessian(self.tangential, self.mesh, x - self._x_lagged,
-                                              self.projection)
-            H = H.tocoo()
-            keep = self.free[H.row] & self.free[H.col]
-            g = self.gdim
-            to_global = lambda i: self.surface[i // g] * g + i % g  # noqa: E731
-            rows, cols = to_global(H.row[keep]), to_global(H.col[keep])
-            vals = scale * H.data[keep]
-            ranges = np.cumsum(self.counts)  # surface vertices per rank, in rank order
-            owner = np.searchsorted(ranges, H.row[keep] // g, side="right")
-            parts = [(rows[owner == r], cols[owner == r], vals[owner == r])
-                     for r in range(self.comm.size)]
-        rows, cols, vals = self.comm.scatter(parts, root=0)
+        H = self.kappa * self.potential.hessian(self.collisions, self.halo.mesh, x,
+                                                self.projection)
+        triplets = []
+        if self.friction is not None:
+            xf = self._friction_positions(x)
+            Hf = self.friction.hessian(self.tangential, self._friction_halo.mesh,
+                                       xf - self._x_lagged, self.projection)
+            if self._friction_halo is self.halo:
+                H = H + Hf
+            else:
+                Hf = Hf.tocoo()
+                triplets.append(self._to_global(self._friction_halo, Hf.row, Hf.col,
+                                                scale * Hf.data))
+        H = H.tocoo()
+        triplets.insert(0, self._to_global(self.halo, H.row, H.col, scale * H.data))
+        rows, cols, vals = (np.concatenate(t) for t in zip(*triplets))
+        owner = np.searchsorted(self.part.ranges, rows // self.gdim, side="right")
+        parts = [(rows[owner == r], cols[owner == r], vals[owner == r])
+                 for r in range(self.comm.size)]
+        got = self.comm.alltoall(parts)
+        rows, cols, vals = (np.concatenate(t) for t in zip(*got))
         if rows.size:
             order = np.lexsort((cols, rows))
             rows, cols, vals = rows[order], cols[order], vals[order]
@@ -287,6 +321,11 @@ class IPCContact:
     def step_bound(self, y: np.ndarray) -> float:
         """The largest collision-free step along the update ``-y`` (collective).
 
+        Each rank sweeps its local mesh (its facets and the halo), whose pairs include every
+        pair whose lowest vertex it owns when the halo reaches 2 |dy|_max + L past the
+        region (else a wider halo is built for this sweep); the bound is the minimum over
+        ranks.
+
         Args:
             y: The Newton update as a local dof array (the trial point is x - alpha y).
 
@@ -295,12 +334,22 @@ class IPCContact:
             (ipctk's continuous collision detection, with its conservative rescaling).
         """
         x0 = self._update()
-        dy = self.positions(y)
+        start = time.perf_counter()
+        y_owned = y.reshape(-1, self.gdim)[: self.n_owned]
+        sweep = float(np.max(np.linalg.norm(y_owned[self.part.blocks], axis=1), initial=0.0))
+        sweep = self.comm.allreduce(sweep, op=MPI.MAX)
+        halo = self.halo
+        if 2 * sweep + halo.longest + 4 * self._drift > halo.radius:
+            halo = self._build_halo(lambda L: self.dhat + 2 * sweep + 3 * L)
+            x0 = halo.x_built
+        dy = halo.exchange.fetch(np.ascontiguousarray(y_owned))
+        self.timers["exchange_s"] += time.perf_counter() - start
         start = time.perf_counter()
         alpha = float(ipctk.compute_collision_free_stepsize(
-            self.mesh, x0, x0 - dy, narrow_phase_ccd=self.ccd)) if self.comm.rank == 0 else None
+            halo.mesh, x0, x0 - dy, narrow_phase_ccd=self.ccd))
+        alpha = self.comm.allreduce(alpha, op=MPI.MIN)
         self.timers["ccd_s"] += time.perf_counter() - start
-        return self.comm.bcast(alpha, root=0)
+        return alpha
 
     def exact_hessian(self, exact: bool) -> None:
         """Assemble the barrier's and friction's exact Hessian (True) or IPC's per-pair PSD
@@ -358,40 +407,51 @@ class IPCContact:
         with lambda_k the pair's barrier force kappa |dB_k/dd| (area-weighted, in N).
         """
         x = self._update()
-        if self.comm.rank == 0:
-            normal = ipctk.BarrierPotential(self.dhat, self.kappa, True)
-            self.tangential = ipctk.TangentialCollisions()
-            self.tangential.build(self.mesh, x, self.collisions, normal,
-                                  float(self.cfg["friction"]))
-            self.friction = ipctk.FrictionPotential(float(self.cfg["epsv"]) * h)
-            self._x_lagged = x.copy()
-        else:
-            self.friction = True  # rank 0 holds the potential; the others only take part
+        normal = ipctk.BarrierPotential(self.dhat, self.kappa, True)
+        self.tangential = ipctk.TangentialCollisions()
+        self.tangential.build(self.halo.mesh, x, self.collisions, normal,
+                              float(self.cfg["friction"]))
+        self.friction = ipctk.FrictionPotential(float(self.cfg["epsv"]) * h)
+        self._x_lagged = x.copy()
+        #: the local mesh the friction pairs live on (kept if the halo is rebuilt)
+        self._friction_halo = self.halo
 
     def _adapt(self, weight: float, grad_energy: np.ndarray, average_mass: float) -> None:
-        """IPC's adaptive kappa at the step start (module docstring)."""
+        """IPC's adaptive kappa at the step start (module docstring), from global sums."""
         x = self._update()
-        g_energy = self.positions(grad_energy)
-        value = None
-        if self.comm.rank == 0:
-            g_barrier = self.potential.gradient(self.collisions, self.mesh, x)
-            weights = np.mean(self.mesh.vertex_areas) / self.dhat ** 3
-            kappa, self.kappa_max = ipctk.initial_barrier_stiffness(
-                self.diagonal, self.potential.barrier, self.dhat, average_mass / weights,
-                weight * g_energy.ravel(), g_barrier)
-            # balanced once, where pairs exist; then only IPC's update moves it, so kappa
-            # stays put while nothing changes (a pile at rest keeps one objective)
-            value = self.kappa_floor if self.balanced else max(kappa, self.kappa_floor)
-            self.balanced = self.balanced or self.num_pairs > 0
-            self.kappa_floor = value
-            self._distance = self._min_distance(x)
-        self.kappa_ipc = self.comm.bcast(value, root=0)
+        blocks = self.part.blocks
+        g_energy = grad_energy.reshape(-1, self.gdim)[blocks]
+        g_local = self.potential.gradient(self.collisions, self.halo.mesh, x)
+        g_barrier = np.zeros((self.n_owned, self.gdim))
+        self.halo.to_owners(g_local.reshape(-1, self.gdim), g_barrier)
+        g_barrier = g_barrier[blocks]
+        area = self.halo.mesh.vertex_areas[self.halo.owned]
+        areas = self.comm.allreduce(float(np.sum(area)))
+        weights = areas / self.part.count / self.dhat ** 3
+        if self.comm.size == 1:  # the serial call, to the last digit
+            weights = np.mean(self.halo.mesh.vertex_areas) / self.dhat ** 3
+            g_e, g_b = weight * g_energy.ravel(), g_local
+        else:  # ipctk's kappa depends on the vectors through -g_b.g_e / |g_b|^2 only
+            dot = self.comm.allreduce(float(np.sum(weight * g_energy * g_barrier)))
+            norm2 = self.comm.allreduce(float(np.sum(g_barrier * g_barrier)))
+            g_b = np.array([np.sqrt(norm2)])
+            g_e = np.array([dot / g_b[0] if norm2 > 0 else 0.0])
+        kappa, self.kappa_max = ipctk.initial_barrier_stiffness(
+            self.diagonal, self.potential.barrier, self.dhat, average_mass / weights, g_e, g_b)
+        # balanced once, where pairs exist; then only IPC's update moves it, so kappa
+        # stays put while nothing changes (a pile at rest keeps one objective)
+        value = self.kappa_floor if self.balanced else max(kappa, self.kappa_floor)
+        self.balanced = self.balanced or self.num_pairs > 0
+        self.kappa_floor = value
+        self._distance = self._min_distance(x)
+        self.kappa_ipc = value
         self.kappa = self.kappa_ipc / weight
 
     def _min_distance(self, x: np.ndarray) -> float:
-        """Rank 0: the smallest distance of the pairs nearer than d_hat (inf if none)."""
-        return float(self.collisions.compute_minimum_distance(self.mesh, x)) \
-            if self.num_pairs else np.inf
+        """The smallest distance of the pairs nearer than d_hat (inf if none; collective)."""
+        local = float(self.collisions.compute_minimum_distance(self.halo.mesh, x)) \
+            if len(self.collisions) else np.inf
+        return self.comm.allreduce(local, op=MPI.MIN)
 
     def state(self) -> dict[str, float]:
         """What a checkpoint keeps across steps.
@@ -421,32 +481,32 @@ class IPCContact:
             was lagged (IPC's normal force and tangent basis taken at x_n: 1 with friction).
         """
         x = self._update()
-        d = self._min_distance(x) if self.comm.rank == 0 else None
         return {"barrier_stiffness": self.kappa, "dhat": self.dhat,
-                "contact_pairs": self.comm.bcast(self.num_pairs, root=0),
-                "min_distance": self.comm.bcast(d, root=0),
+                "contact_pairs": self.num_pairs, "min_distance": self._min_distance(x),
                 "friction_lags": int(self.friction is not None)}
 
     def finish_step(self) -> None:
         """After an accepted step: IPC's update of kappa from the distance's trend."""
         x = self._update()
-        if self.cfg["stiffness"] != "adaptive" or self.comm.rank != 0:
+        if self.cfg["stiffness"] != "adaptive":
             return
         d = self._min_distance(x)
         if np.isfinite(d) and np.isfinite(self._distance):
             self.kappa_floor = ipctk.update_barrier_stiffness(
                 self._distance, d, self.kappa_max, self.kappa_floor, self.diagonal)
 
-    def _check_rest(self, x: np.ndarray, names: list[str]) -> str | None:
-        """Rank 0: no surfaces cross, no two bodies within d_hat at rest (None: fine).
+    def _check_rest(self, names: list[str]) -> str | None:
+        """No surfaces cross, no two bodies within d_hat at rest (None: fine; collective).
 
         Pairs of one body within d_hat are legal (a thin part): the barrier is finite there.
+        Each rank checks its local mesh; the verdicts are combined.
         """
-        self.collisions.build(self.mesh, x, self.dhat)
-        ids = [c.vertex_ids(self.mesh.edges, self.mesh.faces) for c in self.collisions]
-        pairs = {tuple(sorted({int(self.vertex_body[v]) for v in vs if v >= 0})) for vs in ids}
-        between = sorted(p for p in pairs if len(p) == 2)
-        if ipctk.has_intersections(self.mesh, x):
+        x = self._update()
+        mesh, body = self.halo.mesh, self.halo.vertex_body
+        ids = [c.vertex_ids(mesh.edges, mesh.faces) for c in self.collisions]
+        pairs = {tuple(sorted({int(body[v]) for v in vs if v >= 0})) for vs in ids}
+        between = sorted(set().union(*self.comm.allgather({p for p in pairs if len(p) == 2})))
+        if self.comm.allreduce(bool(ipctk.has_intersections(mesh, x)), op=MPI.LOR):
             if between:
                 a, b = between[0]
                 return (f"at rest, bodies {names[a]!r} and {names[b]!r} intersect; move them "
