@@ -156,6 +156,8 @@ class IPCContact:
         self.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
         self.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
         self.diagonal = float(np.linalg.norm(hi - lo))
+        #: how many local meshes this rank has built (halos, and wider ones for a CCD sweep)
+        self.halo_builds = 0
         self.halo = self._build_halo()
         error = self._check_rest(body_names)
         if error:
@@ -176,6 +178,7 @@ class IPCContact:
             reach = lambda L: self.dhat + (3.0 + 8.0 * HALO_MARGIN) * L  # noqa: E731
         halo = self.part.build(self._u_owned(), reach)
         halo.margin = HALO_MARGIN * halo.longest
+        self.halo_builds += 1
         self.timers["exchange_s"] += time.perf_counter() - start
         return halo
 

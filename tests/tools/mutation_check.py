@@ -913,6 +913,12 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_safety.py::"
               "test_a_module_ready_without_its_lock_loads_instead_of_failing",),
              "a module ready without its lock recompiles and fails on .c.cached"),
+    Mutation("halo-pairs-counted-twice", "fem_anim/contact/distribution.py",
+             "    if halo.part.comm.size == 1:\n        return collisions",
+             "    if True:\n        return collisions",
+             ("tests/test_contact_distribution.py::test_distributed_contact_equals_serial",),
+             "every rank evaluates every pair of its local mesh, so pairs within two ranks' "
+             "halos count twice under MPI"),
 ]
 
 
