@@ -169,11 +169,17 @@ class SurfaceHalo:
         if comm.size > 1:
             owned_x = part.owned_rest + u_owned[part.blocks]
             item_lo, item_hi = np.concatenate([lo, owned_x]), np.concatenate([hi, owned_x])
-            order = _morton(0.5 * (item_lo + item_hi))
+            centre = 0.5 * (item_lo + item_hi)
+            order = _morton(centre)
+            # chunks of CHUNK items along the curve, cut where the curve jumps by more
+            # than the radius (a chunk spanning a gap would pull in what lies between)
+            jumps = np.linalg.norm(np.diff(centre[order], axis=0), axis=1) > radius
             boxes = []
-            for k in range(0, len(order), CHUNK):
-                chunk = order[k:k + CHUNK]
-                boxes.append((item_lo[chunk].min(0) - radius, item_hi[chunk].max(0) + radius))
+            for run in np.split(order, np.flatnonzero(jumps) + 1):
+                for k in range(0, len(run), CHUNK):
+                    chunk = run[k:k + CHUNK]
+                    boxes.append((item_lo[chunk].min(0) - radius,
+                                  item_hi[chunk].max(0) + radius))
             boxes = np.asarray(boxes).reshape(-1, 2, g)
             every = comm.allgather(boxes)
             sends = []

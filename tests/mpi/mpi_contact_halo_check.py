@@ -4,9 +4,8 @@ Usage (``tests/test_contact_distribution.py`` runs it on 1 and 2 ranks and compa
 
     mpirun -n 2 python tests/mpi/mpi_contact_halo_check.py OUT.npz [--steps N (2)]
 
-Two pairs of parallel bars (0.5 m long, the pairs 0.5 m apart), the bars of each pair
-thrown sideways at each other, with friction: a few implicit-Euler steps bring them into
-contact along their length. Then, at
+Two parallel bars (0.5 m long) thrown sideways at each other and two more far away,
+with friction: a few implicit-Euler steps bring the pair into contact along its length. Then, at
 the final state, the barrier energy (with friction), its gradient, the action H z of its
 Hessian on two vectors z fixed by the dof coordinates, the CCD bound along a vector fixed
 by the coordinates, the pair count and the minimum distance are evaluated; a second set at
@@ -62,9 +61,10 @@ initial = {{ velocity = [0.05, {v}, 0] }}
 
 def scene_text() -> str:
     text = SCENE
-    # (the partitioner gave bodies 0, 2 to one rank and 1, 3 to the other: a pair on each)
-    for k, (y, z, v, turn) in enumerate([(0.0, 0.0, 0.5, 0), (0.5, 0.0, 0.5, 0),
-                                         (0.046, 0.005, -0.5, 3), (0.546, 0.005, -0.5, -3)]):
+    # (on 2 ranks the partitioner gives bodies 0 and 2 to one rank, 1 and 3 to the other:
+    # the pair's contact crosses ranks, and bodies 2 and 3 lie outside the other's halo)
+    for k, (y, z, v, turn) in enumerate([(0.0, 0.0, 0.5, 0), (0.046, 0.005, -0.5, 3),
+                                         (0.5, 0.0, 0.0, 0), (1.0, 0.0, 0.0, 0)]):
         text += BODY.format(name=f"b{k}", y=y, z=z, turn=turn, v=v)
     return text
 
