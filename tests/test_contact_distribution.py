@@ -70,10 +70,10 @@ def test_distributed_contact_equals_serial(tmp_path):
     one, two = results[1], results[2]
     # the halo is part of the surface, not all of it, and a move past its margin rebuilt it
     assert two["local_faces"].max() < two["surface_faces"] == one["local_faces"][0]
-    assert one["rebuilt"] == two["rebuilt"] == 1
+    assert two["rebuilt"] == 1 and one["rebuilt"] == 0  # one rank's mesh: the whole surface
     assert one["final_pairs"] > 100 and one["moved_pairs"] > 10
     for key, value in one.items():
-        if key in ("local_faces",):
+        if key in ("local_faces", "rebuilt"):
             continue
         other = two[key]
         scale = np.max(np.abs(value)) if np.all(np.isfinite(value)) else 1.0

@@ -19,8 +19,8 @@ ipctk is serial: this module is its MPI wrapper, with the distribution in
 :mod:`fem_anim.contact.distribution`. The surface vertices (P1 dofs on the exterior facets)
 are numbered by their global dof block. No rank gathers the surface: each rank builds the
 collision set of a local mesh (its own facets and a halo of nearby remote facets, rebuilt
-when a vertex has moved past the halo's margin), evaluates the pairs whose lowest vertex it
-owns, sends gradient rows and Hessian rows of remote vertices to their owners, and the
+under MPI when a vertex has moved past the halo's margin), evaluates the pairs whose lowest
+vertex it owns, sends gradient rows and Hessian rows of remote vertices to their owners, and the
 energy, the minimum distance, the pair count and the CCD step bound are reduced over all
 ranks (the adaptive stiffness from reduced dot products), so every rank holds the same
 scalars. On one rank this is the serial computation to the last digit. The Hessian is
@@ -196,7 +196,9 @@ class IPCContact:
         """
         start = time.perf_counter()
         x = self.halo.positions(self._u_owned())
-        self._drift = self.halo.drift(x)
+        # one rank's local mesh is the whole surface: never rebuilt, so a run's last digits
+        # do not depend on when halos were rebuilt (a resumed run repeats an uninterrupted one)
+        self._drift = self.halo.drift(x) if self.comm.size > 1 else 0.0
         if self._drift > self.halo.margin:
             self.halo = self._build_halo()
             x, self._x, self._drift = self.halo.x_built, None, 0.0
@@ -342,7 +344,7 @@ class IPCContact:
         sweep = float(np.max(np.linalg.norm(y_owned[self.part.blocks], axis=1), initial=0.0))
         sweep = self.comm.allreduce(sweep, op=MPI.MAX)
         halo = self.halo
-        if 2 * sweep + halo.longest + 4 * self._drift > halo.radius:
+        if self.comm.size > 1 and 2 * sweep + halo.longest + 4 * self._drift > halo.radius:
             halo = self._build_halo(lambda L: self.dhat + 2 * sweep + 3 * L)
             x0 = halo.x_built
         dy = halo.exchange.fetch(np.ascontiguousarray(y_owned))
