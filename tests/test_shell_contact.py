@@ -1,0 +1,126 @@
+"""Shells in contact: obstacles at the half-thickness, IPC self contact at the thickness.
+
+A shell's mesh is its mid-surface; its faces lie t / 2 on either side. Against an obstacle
+(:mod:`fem_anim.contact.obstacles`) the barrier acts on the distance of the face, so a sheet
+laid on the ground rests with its mid-surface at t / 2 + d*, d* the barrier's equilibrium
+gap under the sheet's weight; with friction it slides to rest at Coulomb's deceleration
+mu g. Against itself (:mod:`fem_anim.contact.ipc`, offset t) two layers stop with their
+mid-surfaces t apart. Every frame is checked by the independent intersection check
+(:func:`fem_anim.contact.intersection.crossing_pairs`), itself tested on known crossings.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fem_anim import compat
+from fem_anim.contact.intersection import boundary_triangles, crossed_frames, crossing_pairs
+from fem_anim.meshes.sheet import structured_sheet
+
+pytestmark = pytest.mark.skipif(not compat.LEGACY, reason="shells run on DOLFINx 0.5 only")
+
+T, RHO, E, G, DHAT = 0.002, 500.0, 1.0e6, 9.81, 1.0e-3
+
+
+def _sheet(size=(0.2, 0.2), n=(4, 4), z=0.0):
+    points, cells = structured_sheet(list(size), list(n), triangulation="right")
+    points = np.c_[points[:, :2], np.full(len(points), z)]
+    return points, cells
+
+
+def _box_surface(lo, hi):
+    """The boundary triangles of a box of 6 tetrahedra (Kuhn), its corner points."""
+    corners = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1])
+                        for x in (lo[0], hi[0])])
+    tets = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7],
+                     [0, 4, 6, 7]])
+    return corners, boundary_triangles(tets)
+
+
+def test_crossing_pairs_finds_a_sheet_through_a_solid_and_through_itself():
+    """A flat sheet has no crossing (adjacent triangles excluded); a box pushed through the
+    sheet crosses it, the box above it does not; a sheet folded through itself crosses."""
+    points, cells = _sheet()
+    assert len(crossing_pairs(points, cells)) == 0
+    for z_lo, crossed in ((-0.05, True), (0.01, False)):
+        box, skin = _box_surface([0.05, 0.05, z_lo], [0.15, 0.15, z_lo + 0.1])
+        x = np.vstack([points, box])
+        soup = np.vstack([cells, skin + len(points)])
+        pairs = crossing_pairs(x, soup)
+        assert (len(pairs) > 0) == crossed
+        if crossed:  # every pair is one sheet triangle and one box triangle
+            assert np.all((pairs[:, 0] < len(cells)) & (pairs[:, 1] >= len(cells)))
+    # fold the half x > 0.1 back over the other half, from 1 cm above it to 2 cm below
+    folded = points.copy()
+    right = points[:, 0] > 0.1 + 1e-12
+    folded[right, 0] = 0.1 - 0.5 * (points[right, 0] - 0.1)
+    folded[right, 2] = 0.04 - 0.6 * (points[right, 0] - 0.1)
+    above = folded.copy()
+    above[right, 2] = 0.01
+    assert crossed_frames(points, cells, [above - points]) == []
+    assert crossed_frames(points, cells, [np.zeros_like(points), folded - points]) == [1]
+
+
+def _barrier_gap(pressure: float, kappa: float, dhat: float) -> float:
+    """d* with p(d*) = pressure, p = -kappa / dhat b'(d), b = -(d - dhat)^2 ln(d / dhat)."""
+    from scipy.optimize import brentq
+
+    def p(d):
+        return -kappa / dhat * (-2 * (d - dhat) * np.log(d / dhat) - (d - dhat) ** 2 / d)
+    return brentq(lambda d: p(d) - pressure, 1e-12 * dhat, dhat * (1 - 1e-12), xtol=1e-18)
+
+
+def _scene(**extra):
+    scene = {
+        "name": "sheet", "mesh": {"shape": "sheet", "size": [0.2, 0.2],
+                                  "origin": [-0.1, -0.1, 0.02], "element_size": 0.05},
+        "shell": {"thickness": T},
+        "material": {"model": "stvk", "youngs_modulus": E, "poisson_ratio": 0.3,
+                     "density": RHO, "mass": "lumped"},
+        "time": {"dt": 0.01, "steps": 20}, "output": {"render": False, "fps": 100},
+        "gravity": {"acceleration": [0.0, 0.0, -G]},
+        "obstacle": [{"type": "plane", "point": [0.0, 0.0, 0.0], "normal": [0, 0, 1],
+                      "dhat": DHAT}]}
+    for key, value in extra.items():
+        scene[key] = value
+    return scene
+
+
+def _frames(scene, out):
+    import fem_anim
+
+    with fem_anim.run(fem_anim.Scene.from_dict(scene), out) as run:
+        return run.points, run.cells, [run.displacement(k) for k in range(len(run.times))], \
+            np.asarray(run.times)
+
+
+def test_sheet_dropped_on_the_ground_rests_at_the_offset(tmp_path):
+    """A flat sheet dropped 2 cm rests flat with its mid-surface at t / 2 + d*, d* the
+    barrier's gap carrying its weight rho t g (kappa = E); no frame below it, no crossing."""
+    points, cells, frames, _ = _frames(_scene(), tmp_path / "drop")
+    z = points[:, 2] + frames[-1][:, 2]
+    expected = T / 2 + _barrier_gap(RHO * T * G, E, DHAT)
+    assert np.abs(z - expected).max() < 1e-9
+    assert min((points[:, 2] + u[:, 2]).min() for u in frames) > T / 2
+    assert crossed_frames(points, cells, frames) == []
+
+
+def test_sheet_sliding_on_the_ground_stops_at_coulomb_deceleration(tmp_path):
+    """A sheet resting at its gap, thrown along x at v0 on ground with friction mu: its
+    centre moves v0 t - mu g t^2 / 2 while it slides (lagged IPC friction, implicit Euler:
+    first order in dt) and it stops at v0^2 / (2 mu g)."""
+    mu, v0 = 0.3, 0.5
+    z0 = T / 2 + _barrier_gap(RHO * T * G, E, DHAT)
+    scene = _scene(initial={"velocity": [v0, 0.0, 0.0]},
+                   time={"dt": 0.005, "steps": 50})
+    scene["mesh"]["origin"] = [-0.1, -0.1, z0]
+    scene["obstacle"][0].update(friction=mu, epsv=1e-4)
+    points, cells, frames, times = _frames(scene, tmp_path / "slide")
+    x = np.array([u[:, 0].mean() for u in frames])
+    stop = v0 / (mu * G)
+    sliding = times < 0.8 * stop
+    analytic = v0 * times - mu * G * times ** 2 / 2
+    assert np.abs(x[sliding] - analytic[sliding]).max() < 0.03 * analytic[sliding].max()
+    assert x[-1] == pytest.approx(v0 ** 2 / (2 * mu * G), rel=0.03)
+    assert crossed_frames(points, cells, frames) == []
