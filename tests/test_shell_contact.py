@@ -124,3 +124,52 @@ def test_sheet_sliding_on_the_ground_stops_at_coulomb_deceleration(tmp_path):
     assert np.abs(x[sliding] - analytic[sliding]).max() < 0.03 * analytic[sliding].max()
     assert x[-1] == pytest.approx(v0 ** 2 / (2 * mu * G), rel=0.03)
     assert crossed_frames(points, cells, frames) == []
+
+
+def _u_fold(path, length=0.1, gap=0.02, width=0.06, h=0.02):
+    """A strip folded into a U as an OBJ file: lower leg z = 0 (x in [0, L]), a wall at
+    x = L up to z = gap, an upper leg back over the lower one at z = gap."""
+    n_along = round((2 * length + gap) / h)
+    flat, cells = structured_sheet([2 * length + gap, width], [n_along, round(width / h)],
+                                   triangulation="alternate")
+    s = flat[:, 0]
+    x = np.where(s <= length, s, np.where(s <= length + gap, length,
+                                          length - (s - length - gap)))
+    z = np.where(s <= length, 0.0, np.where(s <= length + gap, s - length, gap))
+    points = np.c_[x, flat[:, 1], z]
+    lines = [f"v {p[0]!r} {p[1]!r} {p[2]!r}" for p in points]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in cells]
+    path.write_text("\n".join(lines) + "\n")
+    return points
+
+
+def test_folded_strip_lands_on_itself_the_thickness_apart(tmp_path):
+    """IPC self contact with the thickness as offset: the upper leg of a U-folded strip
+    (lower leg and wall held, no bending stiffness) falls onto the lower leg. Contact pairs
+    form, no frame has a crossing, and the upper leg's vertices above the lower leg (a held
+    flat rectangle at z = 0) stay at z >= t, ending within t + d_hat."""
+    length, gap = 0.1, 0.02
+    _u_fold(tmp_path / "fold.obj", length, gap)
+    scene = _scene(time={"dt": 0.01, "steps": 25})
+    scene["mesh"] = {"shape": "file", "file": str(tmp_path / "fold.obj")}
+    scene["shell"]["bending"] = 0.0
+    scene["material"]["mass"] = "consistent"
+    del scene["obstacle"]
+    scene["contact"] = {"dhat": DHAT}
+    scene["damping"] = {"alpha": 5.0}
+    scene["pin"] = [{"min": [-0.01, -0.01, -0.001], "max": [length + 0.001, 0.07, 0.001]},
+                    {"min": [length - 0.001, -0.01, -0.001], "max": [length + 0.001, 0.07,
+                                                                       gap - 0.001]}]
+    points, cells, frames, _ = _frames(scene, tmp_path / "fold")
+    import fem_anim
+
+    with fem_anim.open_run(tmp_path / "fold") as run:
+        pairs = [row["contact_pairs"] for row in run.stats]
+    assert max(pairs) > 0
+    upper = np.isclose(points[:, 2], gap) & (points[:, 0] < length - 1e-9)
+    over = lambda u: upper & (points[:, 0] + u[:, 0] > 0) & (  # noqa: E731
+        points[:, 0] + u[:, 0] < length)
+    lowest = [(points[over(u), 2] + u[over(u), 2]).min() for u in frames]
+    assert min(lowest) >= T * (1 - 1e-9)
+    assert lowest[-1] < T + DHAT
+    assert crossed_frames(points, cells, frames) == []
