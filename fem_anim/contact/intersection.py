@@ -10,11 +10,12 @@ A shell (cells that are triangles) is its own surface, and is checked without ip
 :func:`crossing_pairs` tests every pair of triangles that share no vertex (adjacent
 triangles meet along their shared edge or vertex by construction) and whose bounding boxes
 overlap, in numpy, by the segment-triangle test: two such triangles cross iff an edge of one
-passes through the other (its ends on opposite sides of the other's plane, the crossing point
-inside it). Distances to a plane below 1e-10 of the scene's size count as zero. It takes any triangle soup, so a sheet and a
-solid's boundary triangles (:func:`boundary_triangles`) are checked together by stacking
-them. Exactly coplanar pairs (every signed volume zero) are not reported: the check is for
-crossings, which contact keeps the shell's thickness away from.
+passes through the other (its ends on opposite sides of the other's plane, the crossing
+point inside it). Distances to a plane below 1e-10 of the scene's size count as zero. It
+takes any triangle soup, so a sheet and a solid's boundary triangles
+(:func:`boundary_triangles`) are checked together by stacking them. Exactly coplanar pairs
+(both ends of every edge on the other's plane) are not reported: the check is for crossings, which contact keeps
+the shell's thickness away from.
 """
 
 from __future__ import annotations

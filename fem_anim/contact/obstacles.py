@@ -19,11 +19,12 @@ are evaluated by a compiled :class:`dolfinx.fem.Expression` at the facet points 
 into the reference cell, as FFCx maps them for ``ds``, on the cells owning each exterior
 facet; minima are reduced over all ranks, so every rank takes the same decision.
 
-A thin shell (a triangle surface in 3D) has no exterior facets to speak of: its contact points
-are the vertices of every triangle (the vertex rule over ``dx``, the lumped mass's, so kappa
-stays a pressure on the mid-surface's area), and the obstacle is grown by the shell's half-thickness t / 2 (a
-plane moved along its normal, a sphere's radius enlarged): d is the distance of the shell's
-face, not of its mid-surface (:mod:`fem_anim.contact.contact_surface`).
+A thin shell (a triangle surface in 3D) has no exterior facets to speak of: its contact
+points are the vertices of every triangle (the vertex rule over ``dx``, the lumped mass's,
+so kappa stays a pressure on the mid-surface's area), and the obstacle is grown by the
+shell's half-thickness t / 2 (a plane moved along its normal, a sphere's radius enlarged): d
+is the distance of the shell's face, not of its mid-surface
+(:mod:`fem_anim.contact.contact_surface`).
 """
 
 from __future__ import annotations

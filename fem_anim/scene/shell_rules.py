@@ -5,9 +5,10 @@ surface file), P1, with a membrane model of :mod:`fem_anim.forms.shell_membrane`
 hinge bending of :mod:`fem_anim.forms.shell_bending`. What its energy does not have yet is
 refused here, one rule a line: several bodies and regions, ``[contact]`` without self
 contact (a shell scene has one body, so its only IPC pairs are the shell's own), obstacles
-with a consistent mass (the barrier's vertex rule must be the mass's), P2, the mixed formulation, stiffness-proportional damping, the
-Hessian filters of solids' ``psi(F)`` and the ``det F`` inversion filter (a surface's 3x3
-``det(I + grad u)`` is zero; its area ratio is positive by construction).
+with a consistent mass (the barrier's vertex rule must be the mass's), P2, the mixed
+formulation, stiffness-proportional damping, the Hessian filters of solids' ``psi(F)`` and
+the ``det F`` inversion filter (a surface's 3x3 ``det(I + grad u)`` is zero; its area ratio
+is positive by construction).
 """
 
 from __future__ import annotations
