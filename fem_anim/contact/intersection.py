@@ -14,8 +14,8 @@ passes through the other (its ends on opposite sides of the other's plane, the c
 point inside it). Distances to a plane below 1e-10 of the scene's size count as zero. It
 takes any triangle soup, so a sheet and a solid's boundary triangles
 (:func:`boundary_triangles`) are checked together by stacking them. Exactly coplanar pairs
-(both ends of every edge on the other's plane) are not reported: the check is for crossings, which contact keeps
-the shell's thickness away from.
+(both ends of every edge on the other's plane) are not reported: the check is for crossings,
+which contact keeps the shell's thickness away from.
 """
 
 from __future__ import annotations
