@@ -237,3 +237,30 @@ render = false
     ua = meshio.read(outs[1] / "final.vtu").point_data["displacement"]
     ub = meshio.read(outs[2] / "final.vtu").point_data["displacement"]
     assert np.linalg.norm(ub - ua) <= 1e-8 * np.linalg.norm(ua)
+
+
+def test_a_shell_thicker_than_its_elements_apart_is_refused(tmp_path):
+    """Self contact with t = 6 cm on a sheet of 5 cm elements: non-adjacent triangles are
+    nearer than the offset at rest (an infinite barrier), refused in one line, exit 2."""
+    from test_shell import SHEET, _run
+
+    text = SHEET.replace("thickness = 0.002", "thickness = 0.06").replace(
+        "element_size = 0.1", "element_size = 0.05") + "[contact]\ndhat = 0.001\n"
+    code, err = _run(tmp_path, "thick", text)
+    assert code == 2
+    assert len(err) == 1 and "not more than its thickness" in err[0], err
+
+
+def test_a_shell_run_is_drawn_in_3d(tmp_path):
+    """The renderer reads a shell run's triangles as a surface in 3D (its scene.json has
+    [shell]); a 2D solid's triangles stay 2D."""
+    import json
+
+    from fem_anim.render.frames import space_dim
+
+    (tmp_path / "scene.json").write_text(json.dumps({"scene": {"shell": {"thickness": T},
+                                                               "mesh": {"dim": 3}}}))
+    assert space_dim("triangle", tmp_path) == 3
+    (tmp_path / "scene.json").write_text(json.dumps({"scene": {"mesh": {"dim": 2}}}))
+    assert space_dim("triangle", tmp_path) == 2
+    assert space_dim("tetra", tmp_path) == 3

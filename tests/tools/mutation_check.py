@@ -943,6 +943,26 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_contact.py::"
               "test_sheet_sliding_on_the_ground_stops_at_coulomb_deceleration",),
              "obstacle friction dropped"),
+    Mutation("shell-rest-nearer-than-offset", "fem_anim/contact/ipc.py",
+             "compute_minimum_distance(self.mesh, x) <= self.offset:",
+             "compute_minimum_distance(self.mesh, x) < 0.0:",
+             ("tests/test_shell_contact.py::"
+              "test_a_shell_thicker_than_its_elements_apart_is_refused",),
+             "a shell whose elements are nearer than its thickness at rest is accepted"),
+    Mutation("render-shell-flat", "fem_anim/render/frames.py",
+             'return 3 if "shell" in scene else 2', "return 2",
+             ("tests/test_shell_contact.py::test_a_shell_run_is_drawn_in_3d",),
+             "a shell's triangles drawn as a 2D mesh (z dropped)"),
+    Mutation("shell-extent-least", "fem_anim/mesh/bodies.py",
+             "extent = float(spans.max() if shell else spans.min())",
+             "extent = float(spans.min())",
+             ("tests/test_demos.py::test_demo_runs[drape.py]",),
+             "contact.dhat compared with a flat sheet's zero thickness (every sheet refused)"),
+    Mutation("run-dim-from-cells", "fem_anim/runs.py",
+             'return int(scene["mesh"]["dim"])', "return self.cells.shape[1] - 1",
+             ("tests/test_shell_contact.py::"
+              "test_sheet_dropped_on_the_ground_rests_at_the_offset",),
+             "a shell run's points read back as 2D"),
 ]
 
 
