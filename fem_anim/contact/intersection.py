@@ -9,10 +9,10 @@ frames read back from ``trajectory.xdmf``.
 A shell (cells that are triangles) is its own surface, and is checked without ipctk:
 :func:`crossing_pairs` tests every pair of triangles that share no vertex (adjacent
 triangles meet along their shared edge or vertex by construction) and whose bounding boxes
-overlap, in numpy, by the segment-triangle test: two such triangles cross iff an edge of one
-passes through the other (its ends on opposite sides of the other's plane, the crossing
-point inside it). Distances to a plane below 1e-10 of the scene's size count as zero. It
-takes any triangle soup, so a sheet and a solid's boundary triangles
+overlap (a sweep along x), in numpy, by the segment-triangle test: two such triangles cross
+iff an edge of one passes through the other (its ends on opposite sides of the other's
+plane, the crossing point inside it). Distances to a plane below 1e-10 of the scene's size
+count as zero. It takes any triangle soup, so a sheet and a solid's boundary triangles
 (:func:`boundary_triangles`) are checked together by stacking them. Exactly coplanar pairs
 (both ends of every edge on the other's plane) are not reported: the check is for crossings,
 which contact keeps the shell's thickness away from.
@@ -77,17 +77,21 @@ def crossing_pairs(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     Returns:
         (pairs, 2) indices i < j of the crossing triangles (empty: no intersection).
     """
-    tri = np.asarray(triangles, dtype=np.int64)
+    order = np.argsort(x[triangles].min(axis=1)[:, 0], kind="stable")  # sweep along x
+    tri = np.asarray(triangles, dtype=np.int64)[order]
     corners = x[tri]  # (T, 3, 3)
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     tol = 1e-10 * float(np.linalg.norm(np.ptp(x, axis=0)))  # round-off of the positions
     found = []
     for start in range(0, tri.shape[0], CHUNK):
         rows = np.arange(start, min(start + CHUNK, tri.shape[0]))
-        overlap = np.all((lo[rows, None] <= hi[None]) & (lo[None] <= hi[rows, None]), axis=2)
-        overlap &= rows[:, None] < np.arange(tri.shape[0])[None]
+        # later triangles (in x order) that start before the chunk ends along x
+        cols = np.arange(start, np.searchsorted(lo[:, 0], hi[rows, 0].max(), side="right"))
+        overlap = np.all((lo[rows, None] <= hi[None, cols]) & (lo[None, cols] <= hi[rows, None]),
+                         axis=2)
+        overlap &= rows[:, None] < cols[None]
         i, j = np.nonzero(overlap)
-        i = rows[i]
+        i, j = rows[i], cols[j]
         shared = (tri[i][:, :, None] == tri[j][:, None, :]).any(axis=(1, 2))
         i, j = i[~shared], j[~shared]
         hit = np.zeros(i.size, bool)
@@ -95,7 +99,8 @@ def crossing_pairs(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:
             a, b, c = (corners[t, k] for k in range(3))
             for e0, e1 in ((0, 1), (1, 2), (2, 0)):
                 hit |= _segment_crosses(corners[s, e0], corners[s, e1], a, b, c, tol)
-        found.append(np.stack([i[hit], j[hit]], axis=1))
+        pairs = np.sort(order[np.stack([i[hit], j[hit]], axis=1)], axis=1)
+        found.append(pairs)
     return np.concatenate(found) if found else np.empty((0, 2), np.int64)
 
 
