@@ -943,6 +943,10 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_contact.py::"
               "test_sheet_sliding_on_the_ground_stops_at_coulomb_deceleration",),
              "obstacle friction dropped"),
+    Mutation("crossing-sweep-short", "fem_anim/contact/intersection.py",
+             'hi[rows, 0].max(), side="right"', 'hi[rows, 0].min(), side="right"',
+             ("tests/test_shell_contact.py::test_crossing_pairs_sweep_equals_every_pair",),
+             "the sweep stops at the chunk's first x end: pairs further along are missed"),
     Mutation("shell-rest-nearer-than-offset", "fem_anim/contact/ipc.py",
              "compute_minimum_distance(self.mesh, x) <= self.offset:",
              "compute_minimum_distance(self.mesh, x) < 0.0:",
