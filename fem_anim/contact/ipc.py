@@ -13,7 +13,8 @@ surface area, so kappa is a pressure in Pa and B is in J, like the obstacles' ba
 of :mod:`fem_anim.forms.obstacle_contact`). B is +inf at contact, so every trial point
 of the line search is kept on the collision-free part of the Newton segment by ipctk's
 continuous collision detection (:meth:`IPCContact.step_bound`): no accepted state has an
-intersection.
+intersection. A shell's surface is its triangles, kept its thickness apart
+(:mod:`fem_anim.contact.contact_surface`: the ``offset`` d_min).
 
 ipctk is serial: this module is its MPI wrapper, with the distribution in
 :mod:`fem_anim.contact.distribution`. The surface vertices (P1 dofs on the exterior facets)
@@ -49,11 +50,11 @@ import time
 
 import ipctk
 import numpy as np
-from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import compat
+from fem_anim.contact.contact_surface import surface_entities
 from fem_anim.contact.distribution import SurfacePartition, owned_collisions, surface_labels
 from fem_anim.errors import SceneError
 
@@ -93,19 +94,23 @@ class IPCContact:
         pinned: Local dof indices (unblocked) held by Dirichlet conditions.
         body_names: Names of the bodies by marker - 1 (for messages).
         cell_body: Body index of each local cell.
+        offset: The minimum distance d_min the barrier keeps (m): 0 for solids, a shell's
+            thickness (:mod:`fem_anim.contact.contact_surface`); B acts on d^2 - d_min^2
+            with activation d_min + d_hat, and the CCD stops at d_min.
 
     Raises:
         SceneError: (collectively) if two bodies cross or are within ``dhat`` at rest.
     """
 
     def __init__(self, cfg: dict, u, pinned: np.ndarray, body_names: list[str],
-                 cell_body: np.ndarray):
+                 cell_body: np.ndarray, offset: float = 0.0):
         V = u.function_space
         mesh = V.mesh
         self.comm: MPI.Comm = mesh.comm
         ipctk.set_num_threads(1)  # repeatable sums (module docstring)
         self.cfg, self.u = cfg, u
         self.dhat = float(cfg["dhat"])
+        self.offset = float(offset)
         self.gdim = g = mesh.geometry.dim
         tdim = mesh.topology.dim
         index_map = V.dofmap.index_map
@@ -117,13 +122,11 @@ class IPCContact:
                               + mesh.topology.index_map(0).num_ghosts, dtype=np.int64)
         c_to_v = mesh.topology.connectivity(tdim, 0).array.reshape(-1, tdim + 1)
         vertex_dof[c_to_v.ravel()] = compat.cell_dofs(V)[:, : tdim + 1].ravel()
-        facets = dmesh.exterior_facet_indices(mesh.topology)
-        f_to_v = mesh.topology.connectivity(tdim - 1, 0).array.reshape(-1, tdim)
-        f_to_c = mesh.topology.connectivity(tdim - 1, tdim)
-        local_faces = vertex_dof[f_to_v[facets]]
+        entity_vertices, entity_cells = surface_entities(mesh)  # a shell: its triangles
+        local_faces = vertex_dof[entity_vertices]
         faces = index_map.local_to_global(local_faces.ravel().astype(np.int32)).reshape(
-            -1, tdim).astype(np.int64)
-        face_body = cell_body[f_to_c.array[f_to_c.offsets[facets]]].astype(np.int64)
+            -1, g).astype(np.int64)
+        face_body = cell_body[entity_cells].astype(np.int64)
         X = V.tabulate_dof_coordinates()[:, :g]
         is_pinned = np.zeros(V.dofmap.index_map_bs * (n_owned + index_map.num_ghosts), bool)
         is_pinned[pinned] = True
@@ -175,7 +178,7 @@ class IPCContact:
         """
         start = time.perf_counter()
         if reach is None:
-            reach = lambda L: self.dhat + (3.0 + 8.0 * HALO_MARGIN) * L  # noqa: E731
+            reach = lambda L: self.offset + self.dhat + (3.0 + 8.0 * HALO_MARGIN) * L  # noqa: E731
         halo = self.part.build(self._u_owned(), reach)
         halo.margin = HALO_MARGIN * halo.longest
         self.halo_builds += 1
@@ -207,7 +210,7 @@ class IPCContact:
         if self._x is None or not np.array_equal(x, self._x):
             every = ipctk.NormalCollisions()
             every.use_area_weighting = True
-            every.build(self.halo.mesh, x, self.dhat)
+            every.build(self.halo.mesh, x, self.dhat, self.offset)
             self.collisions = owned_collisions(self.halo, every)
             self._x = x
         self.timers["detection_s"] += time.perf_counter() - start
@@ -344,14 +347,15 @@ class IPCContact:
         sweep = float(np.max(np.linalg.norm(y_owned[self.part.blocks], axis=1), initial=0.0))
         sweep = self.comm.allreduce(sweep, op=MPI.MAX)
         halo = self.halo
-        if self.comm.size > 1 and 2 * sweep + halo.longest + 4 * self._drift > halo.radius:
-            halo = self._build_halo(lambda L: self.dhat + 2 * sweep + 3 * L)
+        if self.comm.size > 1 and \
+                self.offset + 2 * sweep + halo.longest + 4 * self._drift > halo.radius:
+            halo = self._build_halo(lambda L: self.offset + self.dhat + 2 * sweep + 3 * L)
             x0 = halo.x_built
         dy = halo.exchange.fetch(np.ascontiguousarray(y_owned))
         self.timers["exchange_s"] += time.perf_counter() - start
         start = time.perf_counter()
         alpha = float(ipctk.compute_collision_free_stepsize(
-            halo.mesh, x0, x0 - dy, narrow_phase_ccd=self.ccd))
+            halo.mesh, x0, x0 - dy, min_distance=self.offset, narrow_phase_ccd=self.ccd))
         alpha = self.comm.allreduce(alpha, op=MPI.MIN)
         self.timers["ccd_s"] += time.perf_counter() - start
         return alpha
@@ -442,7 +446,8 @@ class IPCContact:
             g_b = np.array([np.sqrt(norm2)])
             g_e = np.array([dot / g_b[0] if norm2 > 0 else 0.0])
         kappa, self.kappa_max = ipctk.initial_barrier_stiffness(
-            self.diagonal, self.potential.barrier, self.dhat, average_mass / weights, g_e, g_b)
+            self.diagonal, self.potential.barrier, self.dhat, average_mass / weights, g_e, g_b,
+            dmin=self.offset)
         # balanced once, where pairs exist; then only IPC's update moves it, so kappa
         # stays put while nothing changes (a pile at rest keeps one objective)
         value = self.kappa_floor if self.balanced else max(kappa, self.kappa_floor)
@@ -498,7 +503,8 @@ class IPCContact:
         d = self._min_distance(x)
         if np.isfinite(d) and np.isfinite(self._distance):
             self.kappa_floor = ipctk.update_barrier_stiffness(
-                self._distance, d, self.kappa_max, self.kappa_floor, self.diagonal)
+                self._distance, d, self.kappa_max, self.kappa_floor, self.diagonal,
+                dmin=self.offset)
 
     def _check_rest(self, names: list[str]) -> str | None:
         """No surfaces cross, no two bodies within d_hat at rest (None: fine; collective).
@@ -517,6 +523,11 @@ class IPCContact:
                 return (f"at rest, bodies {names[a]!r} and {names[b]!r} intersect; move them "
                         "apart (body offset)")
             return "at rest, the bodies' surfaces intersect (a mesh crosses itself)"
+        d = self._min_distance(x)
+        if self.offset > 0 and np.isfinite(d) and d <= self.offset:
+            return (f"at rest, two non-adjacent elements of a shell are {d:.3g} m apart, not "
+                    f"more than its thickness {self.offset} m (the contact offset); make the "
+                    "shell thinner or its elements larger")
         if between:
             a, b = between[0]
             return (f"at rest, bodies {names[a]!r} and {names[b]!r} are closer than "
