@@ -735,7 +735,7 @@ MUTATIONS: list[Mutation] = [
               "at_rest",),
              "kappa re-balanced at every step start (changes while nothing changes)"),
     Mutation("stats-min-distance-unrecorded", "fem_anim/contact/ipc.py",
-             '"min_distance": self.comm.bcast(d, root=0)', '"min_distance": self.dhat',
+             '"min_distance": self._min_distance(x)', '"min_distance": self.dhat',
              ("tests/test_contact_pace.py::test_stats_record_the_barrier_and_kappa_stays_put_"
               "at_rest",),
              "stats.csv records d-hat as the smallest distance"),
