@@ -913,6 +913,37 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_safety.py::"
               "test_a_module_ready_without_its_lock_loads_instead_of_failing",),
              "a module ready without its lock recompiles and fails on .c.cached"),
+    Mutation("p2-surface-wrong-split", "fem_anim/contact/p2_surface.py",
+             "((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))",
+             "((a, ab, bc), (ab, b, bc), (ca, bc, c), (ab, bc, ca))",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_splits_each_facet_on_its_midpoint_dofs",),
+             "a P2 facet's first sub-triangle takes the wrong midpoint dof"),
+    Mutation("ipc-mixed-rows-unmapped", "fem_anim/contact/ipc.py",
+             "rows = np.asarray(u_dofs)[rows].astype(np.int64)",
+             "rows = rows.astype(np.int64)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_barrier_taylor_on_p2_and_mixed_unknowns[mixed-0.5]",),
+             "the barrier's gradient of a mixed unknown goes to V's dof numbers, not w's"),
+    Mutation("ipc-mixed-hessian-on-v-rows", "fem_anim/contact/ipc.py",
+             "return rows, (np.asarray(nodes, np.int64) * bs + rows % bs).reshape(-1, g)",
+             "return rows, (self.blocks[:, None] + V.dofmap.index_map.local_range[0]) * g "
+             "+ np.arange(g)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_barrier_taylor_on_p2_and_mixed_unknowns[mixed-0.5]",),
+             "the barrier's Hessian of a mixed unknown goes to V's global rows, not w's"),
+    Mutation("intersection-p2-corners-only", "fem_anim/contact/intersection.py",
+             "    if cells.shape[1] == 4:\n        return unique[counts == 1]",
+             "    if True:\n        return unique[counts == 1]",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_splits_each_facet_on_its_midpoint_dofs",),
+             "the independent check sees a P2 body's facets unsplit (its corners only)"),
+    Mutation("mixed-contact-start-pins-on-w", "fem_anim/simulation/newton_start.py",
+             "fem_petsc.set_bc(u, p.displacement_bcs)",
+             "fem_petsc.set_bc(u, p.bcs)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_incompressible_body_dropped_on_another",),
+             "the collision-free start of a mixed step applies the pins of w to u"),
 ]
 
 
