@@ -146,6 +146,8 @@ def test_barrier_taylor_on_p2_and_mixed_unknowns(tmp_path, formulation, nu):
         if p.ipc.step_stats()["contact_pairs"] > 0:
             break
     assert p.ipc.step_stats()["contact_pairs"] > 0 and np.isfinite(p.objective(None, x))
+    # the first 0.25 mm move that brings a pair within d_hat: the distance (m, not squared)
+    assert 0.005 - 0.00025 <= p.ipc.step_stats()["min_distance"] < 0.005
     p.ipc.projection = ipctk.PSDProjectionMethod.NONE
     rng = np.random.default_rng(1)
     dx = x.duplicate()

@@ -411,7 +411,8 @@ class IPCContact:
         self.kappa = self.kappa_ipc / weight
 
     def _min_distance(self, x: np.ndarray) -> float:
-        """Rank 0: the smallest distance of the pairs nearer than d_hat (inf if none)."""
+        """Rank 0: the smallest SQUARED distance of the pairs nearer than d_hat (m^2, inf if
+        none): ipctk's ``compute_minimum_distance``, the quantity its stiffness update takes."""
         return float(self.collisions.compute_minimum_distance(self.mesh, x)) \
             if self.num_pairs else np.inf
 
@@ -443,7 +444,7 @@ class IPCContact:
             was lagged (IPC's normal force and tangent basis taken at x_n: 1 with friction).
         """
         x = self._update()
-        d = self._min_distance(x) if self.comm.rank == 0 else None
+        d = np.sqrt(self._min_distance(x)) if self.comm.rank == 0 else None  # ipctk's is d^2
         return {"barrier_stiffness": self.kappa, "dhat": self.dhat,
                 "contact_pairs": self.comm.bcast(self.num_pairs, root=0),
                 "min_distance": self.comm.bcast(d, root=0),
