@@ -6,14 +6,17 @@
 set -e
 out=${OUT:-/tmp/p2_mixed_measure}
 scene=docs/contact_scenes/incompressible_drop.toml
-nu="--set body[0].material.poisson_ratio=0.45 --set body[1].material.poisson_ratio=0.45"
+mkdir -p "$out"
+# the displacement variants: nu = 0.45 in both bodies (--set does not reach into [[body]])
+sed 's/poisson_ratio = 0.5,/poisson_ratio = 0.45,/; s/formulation = "mixed"/formulation = "displacement"/' \
+    $scene > "$out/drop_displacement.toml"
 run() { tag=$1; shift; .venv/bin/fem-anim run -q -o "$out/$tag" --set output.render=false "$@"; }
 run mixed_p2 $scene
-run displacement_p2 $scene --set 'element.formulation="displacement"' $nu
-run displacement_p1 $scene --set 'element.formulation="displacement"' --set element.degree=1 $nu
+run displacement_p2 "$out/drop_displacement.toml"
+run displacement_p1 "$out/drop_displacement.toml" --set element.degree=1
 .venv/bin/python - "$out" <<'PY'
 import csv, json, pathlib, sys
-for p in sorted(pathlib.Path(sys.argv[1]).iterdir()):
+for p in sorted(q for q in pathlib.Path(sys.argv[1]).iterdir() if q.is_dir()):
     rows = list(csv.DictReader(open(p / "stats.csv")))
     s = json.loads((p / "summary.json").read_text())
     e = s["energy"]

@@ -16,6 +16,16 @@ explicitly still wins, as does ``--solver`` on the command line.
   accepts without meeting the residual test is marked in ``stats.csv`` (reason 7,
   ``residual_ratio``), so the inexactness is visible.
 
+A scene with contact (``[[obstacle]]`` tables, ``[contact]``, or several ``[[body]]`` tables,
+which switch it on) gets none of the preview's keys: its steps are solved to the stopping test
+as in ``"exact"``. One linearisation of the barrier per step does not keep the energy of an
+impact bounded, whatever the linear solver: on ``demos/pile.toml`` the one-step preview gained
+energy (with ``cg-icc``, whose incomplete Cholesky meets the pile's indefinite exact Hessian,
+also with steps retried at half dt), and with MUMPS Cholesky it gained several times the energy
+the run exchanged (docs/contact.md, "The preview on contact scenes", measured by
+``bash docs/contact_scenes/measure_preview.sh``). The run's first line says so
+(:func:`fem_anim.scene.contact_integrator.integrator_note`).
+
 A mixed (u, p) scene that names no ``preset`` gets :data:`MIXED_DEFAULT_PRESET` (``ldlt``,
 MUMPS LDL^T with pivoting: the saddle point is symmetric indefinite, which the default
 ``cholesky`` cannot factorise) in either mode, and keeps the exact Hessian; a scene whose regions
@@ -65,6 +75,8 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
         _several_models(raw) or "shell" in raw
     if mixed:  # the saddle point needs ldlt, lu or schur (fem_anim.problem.mixed_space)
         solver.setdefault("preset", MIXED_DEFAULT_PRESET)
+    if mode == "preview" and _has_contact(raw):  # converged steps (module docstring)
+        mode = "exact"
     for key, value in SOLVER_MODES[mode].items():
         if key == "preset" and mixed:
             continue
@@ -86,6 +98,14 @@ def _fill_petsc(solver: dict[str, Any], options: dict[str, Any]) -> None:
     for name, value in options.items():
         if name not in given:
             table[name] = value
+
+
+def _has_contact(raw: dict[str, Any]) -> bool:
+    """Whether raw scene tables declare contact: obstacles, ``[contact]``, or several bodies
+    (which switch ``[contact]`` on: :mod:`fem_anim.scene.validation`)."""
+    bodies = raw.get("body")
+    return bool(raw.get("obstacle")) or "contact" in raw or \
+        (isinstance(bodies, list) and len(bodies) > 1)
 
 
 def _several_models(raw: dict[str, Any]) -> bool:

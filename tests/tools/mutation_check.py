@@ -944,6 +944,13 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_p2_mixed_contact.py::"
               "test_incompressible_body_dropped_on_another",),
              "the collision-free start of a mixed step is copied as a displacement into w"),
+    Mutation("preview-one-step-on-contact", "fem_anim/scene/modes.py",
+             'if mode == "preview" and _has_contact(raw):',
+             "if False:",
+             ("tests/test_preview_contact.py::"
+              "test_preview_on_the_pile_does_not_fail_or_gain_energy",),
+             "the preview's one Newton step per step on a contact scene (the pile fails at "
+             "step 1)"),
 ]
 
 
