@@ -2,7 +2,8 @@
 
 * the P2 contact surface (:mod:`fem_anim.contact.p2_surface`): each boundary triangle split
   in four on its edge-midpoint dofs; the same triangles as the independent check's
-  (:mod:`fem_anim.contact.intersection`, which orders the nodes by their coordinates);
+  (:mod:`fem_anim.contact.intersection`, which orders the nodes by their coordinates); in 2D
+  each boundary edge split in two at its midpoint dof;
 * the barrier inside the step objective of a P2 body and of a mixed one (its rows are the
   displacement block of the unknown w = (u, p~)): Taylor tests of the gradient and the
   exact Hessian at a state with active pairs;
@@ -241,3 +242,24 @@ def test_incompressible_body_dropped_on_another(tmp_path):
     assert max(pairs) > 0
     points, cells = _p2_check(sim)
     assert crossed_frames(points, cells, [s.u.reshape(-1, 3) for s in states]) == []
+
+
+def test_p2_surface_in_2d_splits_each_edge_at_its_midpoint_dof():
+    mesh = dmesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [1.0, 0.6]], [3, 2])
+    V = compat.vector_space(mesh, 2)
+    mesh.topology.create_connectivity(1, 2)
+    mesh.topology.create_connectivity(1, 0)
+    mesh.topology.create_connectivity(2, 0)
+    facets = dmesh.exterior_facet_indices(mesh.topology)
+    f_to_v = mesh.topology.connectivity(1, 0).array.reshape(-1, 2)
+    c_to_v = mesh.topology.connectivity(2, 0).array.reshape(-1, 3)
+    faces, parent = surface_faces(V, facets, f_to_v, c_to_v)
+    assert faces.shape == (2 * facets.size, 2)
+    X = V.tabulate_dof_coordinates()[:, :2]
+    v_to_geo = np.empty(c_to_v.max() + 1, np.int64)
+    v_to_geo[c_to_v.ravel()] = compat.geometry_dofmap(mesh).ravel()
+    a, b = (mesh.geometry.x[v_to_geo[f_to_v[facets, i]], :2] for i in range(2))
+    m = (a + b) / 2
+    expected = np.stack([np.stack([a, m], 1), np.stack([m, b], 1)], 1)
+    np.testing.assert_allclose(X[faces].reshape(expected.shape), expected, atol=1e-14)
+    assert np.array_equal(parent, np.repeat(np.arange(facets.size), 2))

@@ -951,6 +951,12 @@ MUTATIONS: list[Mutation] = [
               "test_preview_on_the_pile_does_not_fail_or_gain_energy",),
              "the preview's one Newton step per step on a contact scene (the pile fails at "
              "step 1)"),
+    Mutation("p2-surface-2d-unsplit", "fem_anim/contact/p2_surface.py",
+             "np.stack([m, corners[:, 1]], 1)], 1)",
+             "np.stack([corners[:, 0], corners[:, 1]], 1)], 1)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_in_2d_splits_each_edge_at_its_midpoint_dof",),
+             "a 2D P2 boundary edge's second segment skips its midpoint dof"),
 ]
 
 
