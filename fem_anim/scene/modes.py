@@ -28,7 +28,11 @@ the run exchanged (docs/contact.md, "The preview on contact scenes", measured by
 
 A mixed (u, p) scene that names no ``preset`` gets :data:`MIXED_DEFAULT_PRESET` (``ldlt``,
 MUMPS LDL^T with pivoting: the saddle point is symmetric indefinite, which the default
-``cholesky`` cannot factorise) in either mode, and keeps the exact Hessian; a scene whose regions
+``cholesky`` cannot factorise) in either mode, and keeps the exact Hessian; with contact it
+also gets :data:`MIXED_CONTACT_PETSC`, PETSc's secant line search on the merit function
+||r||^2/2 (``l2``): its saddle point has no objective, and at an impact backtracking (``bt``)
+fails where the barrier's residual is far from linear over a step, and the step is retried at
+half dt (measured in docs/contact.md, "P2 and mixed bodies in contact"); a scene whose regions
 use several material models, or that names another ``method`` or a ``hessian_update``,
 keeps the exact Hessian in either mode (``auto`` filters one model's tangent, and a kept
 Hessian is never filtered). The measurements behind the preview's settings are in the
@@ -41,11 +45,16 @@ from typing import Any
 
 from fem_anim.petsc_options import flatten_options
 
-__all__ = ["MIXED_DEFAULT_PRESET", "SOLVER_MODES", "apply_solver_mode"]
+__all__ = ["MIXED_CONTACT_PETSC", "MIXED_DEFAULT_PRESET", "SOLVER_MODES", "apply_solver_mode"]
 
 #: The preset a mixed (u, p) scene gets when it names none: a pivoting symmetric indefinite
 #: factorisation, exact for the saddle point (``fem-anim solvers``).
 MIXED_DEFAULT_PRESET = "ldlt"
+
+#: The PETSc options a mixed (u, p) scene with contact gets when it sets none of them: the
+#: secant line search on ||r||^2/2 (``l2``) instead of backtracking (``bt``), which fails at
+#: impacts where the barrier's residual is far from linear over a step (module docstring).
+MIXED_CONTACT_PETSC = {"snes_linesearch_type": "l2"}
 
 #: ``solver.mode`` -> the ``[solver]`` keys it fills when the scene leaves them out.
 SOLVER_MODES: dict[str, dict[str, Any]] = {
@@ -77,6 +86,8 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
         solver.setdefault("preset", MIXED_DEFAULT_PRESET)
     if mode == "preview" and _has_contact(raw):  # converged steps (module docstring)
         mode = "exact"
+    if mixed and _has_contact(raw):  # the merit function's line search (module docstring)
+        _fill_petsc(solver, MIXED_CONTACT_PETSC)
     for key, value in SOLVER_MODES[mode].items():
         if key == "preset" and mixed:
             continue
