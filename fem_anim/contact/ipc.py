@@ -17,8 +17,9 @@ intersection. A shell's surface is its triangles, kept its thickness apart
 (:mod:`fem_anim.contact.contact_surface`: the ``offset`` d_min).
 
 ipctk is serial: this module is its one MPI wrapper. The surface vertices (P1
-dofs on the exterior facets) are numbered by their global dof block, in order, so each
-rank owns a contiguous run of them; each evaluation gathers their positions x = X + u to
+dofs on the exterior facets; for P2 also the facets' edge-midpoint dofs, each facet split in
+four on them: :mod:`fem_anim.contact.p2_surface`) are numbered by their global dof block,
+in order, so each rank owns a contiguous run of them; each evaluation gathers their positions x = X + u to
 rank 0, which builds the collision set and evaluates there, then broadcasts scalars and
 sends each rank the gradient entries and Hessian rows it owns. The Hessian is
 projected to PSD per pair (IPC's projection) and dropped on pinned dofs (they are
@@ -49,8 +50,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem_anim import compat
 from fem_anim.contact.contact_surface import surface_entities
+from fem_anim.contact.p2_surface import surface_faces
 from fem_anim.errors import SceneError
 
 __all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "narrow_phase_ccd"]
@@ -79,20 +80,25 @@ class IPCContact:
 
     Args:
         cfg: The validated ``[contact]`` table.
-        u: The displacement Function (P1).
+        u: The displacement Function (P1 or P2).
         pinned: Local dof indices (unblocked) held by Dirichlet conditions.
         body_names: Names of the bodies by marker - 1 (for messages).
         cell_body: Body index of each local cell.
         offset: The minimum distance d_min the barrier keeps (m): 0 for solids, a shell's
             thickness (:mod:`fem_anim.contact.contact_surface`); B acts on d^2 - d_min^2
             with activation d_min + d_hat, and the CCD stops at d_min.
+        unknown: For a mixed (u, p) unknown, ``(W, u_dofs)``: its space and the map from
+            each local dof of ``V`` (unrolled) to the local dof of ``W`` holding it; the
+            barrier's gradient and Hessian then go to those rows of the unknown (the
+            displacement block only: the barrier does not depend on the pressure). None:
+            the unknown is ``u``.
 
     Raises:
         SceneError: (collectively) if two bodies cross or are within ``dhat`` at rest.
     """
 
     def __init__(self, cfg: dict, u, pinned: np.ndarray, body_names: list[str],
-                 cell_body: np.ndarray, offset: float = 0.0):
+                 cell_body: np.ndarray, offset: float = 0.0, unknown=None):
         V = u.function_space
         mesh = V.mesh
         self.comm: MPI.Comm = mesh.comm
@@ -107,14 +113,13 @@ class IPCContact:
         mesh.topology.create_connectivity(tdim - 1, tdim)
         mesh.topology.create_connectivity(tdim - 1, 0)
         mesh.topology.create_connectivity(tdim, 0)
-        vertex_dof = np.empty(mesh.topology.index_map(0).size_local
-                              + mesh.topology.index_map(0).num_ghosts, dtype=np.int64)
         c_to_v = mesh.topology.connectivity(tdim, 0).array.reshape(-1, tdim + 1)
-        vertex_dof[c_to_v.ravel()] = compat.cell_dofs(V)[:, : tdim + 1].ravel()
-        entity_vertices, entity_cells = surface_entities(mesh)  # a shell: its triangles
-        local_faces = vertex_dof[entity_vertices]
-        faces = index_map.local_to_global(local_faces.ravel().astype(np.int32)).reshape(-1, g)
-        face_body = cell_body[entity_cells]
+        # the surface (a solid's boundary facets, a shell's triangles), P2 split on midpoints
+        entity_vertices, entity_cells = surface_entities(mesh)
+        local_faces, parent = surface_faces(V, entity_vertices, c_to_v)
+        faces = index_map.local_to_global(local_faces.ravel().astype(np.int32)).reshape(
+            local_faces.shape)
+        face_body = cell_body[entity_cells[parent]]
         start = index_map.local_range[0]
         ranges = np.asarray(self.comm.allgather(index_map.local_range[1]))
         gathered = self.comm.gather((faces, face_body), root=0)
@@ -128,6 +133,10 @@ class IPCContact:
             owned_lists = np.split(self.surface, np.cumsum(self.counts)[:-1])
         self.blocks = (self.comm.scatter(owned_lists, root=0) - start).astype(np.int64)
         assert np.all(self.blocks < n_owned)
+        self.rows, global_rows = self._unknown_rows(unknown, n_owned)
+        parts = self.comm.gather(global_rows, root=0)
+        #: rank 0: the unknown's global row of each surface dof, in collision order
+        self.global_rows = np.concatenate(parts) if self.comm.rank == 0 else None
         X = V.tabulate_dof_coordinates()[self.blocks, :g]
         is_pinned = np.zeros(V.dofmap.index_map_bs * (n_owned + index_map.num_ghosts), bool)
         is_pinned[pinned] = True
@@ -165,6 +174,21 @@ class IPCContact:
         error = self.comm.bcast(error, root=0)
         if error:
             raise SceneError(error)
+
+    def _unknown_rows(self, unknown, n_owned: int) -> tuple[np.ndarray, np.ndarray]:
+        """The local and global rows of the unknown holding the owned surface dofs
+        (unrolled, vertex-major: x, y(, z) of each vertex)."""
+        g, V = self.gdim, self.u.function_space
+        rows = (self.blocks[:, None] * g + np.arange(g)).ravel()
+        if unknown is None:
+            start = V.dofmap.index_map.local_range[0]
+            return rows, (self.blocks[:, None] + start) * g + np.arange(g)
+        W, u_dofs = unknown
+        rows = np.asarray(u_dofs)[rows].astype(np.int64)
+        bs, index_map = W.dofmap.index_map_bs, W.dofmap.index_map
+        assert np.all(rows < index_map.size_local * bs)  # owned dofs of V are owned in W
+        nodes = index_map.local_to_global((rows // bs).astype(np.int32))
+        return rows, (np.asarray(nodes, np.int64) * bs + rows % bs).reshape(-1, g)
 
     # -- the MPI seam -------------------------------------------------------------------------
     def _gather(self, local: np.ndarray) -> np.ndarray | None:
@@ -242,8 +266,7 @@ class IPCContact:
                                                        x - self._x_lagged)
             grad = grad.reshape(-1, self.gdim)
         mine = self._scatter(grad)
-        values = b.array.reshape(-1, self.gdim)
-        values[self.blocks] += mine
+        b.array[self.rows] += mine.ravel()
         self.timers["barrier_s"] += time.perf_counter() - start
 
     def add_hessian(self, A: PETSc.Mat, scale: float) -> None:
@@ -267,8 +290,8 @@ class IPCContact:
             H = H.tocoo()
             keep = self.free[H.row] & self.free[H.col]
             g = self.gdim
-            to_global = lambda i: self.surface[i // g] * g + i % g  # noqa: E731
-            rows, cols = to_global(H.row[keep]), to_global(H.col[keep])
+            to_global = self.global_rows.ravel()  # dof i of the surface -> the unknown's row
+            rows, cols = to_global[H.row[keep]], to_global[H.col[keep]]
             vals = scale * H.data[keep]
             ranges = np.cumsum(self.counts)  # surface vertices per rank, in rank order
             owner = np.searchsorted(ranges, H.row[keep] // g, side="right")
@@ -392,7 +415,8 @@ class IPCContact:
         self.kappa = self.kappa_ipc / weight
 
     def _min_distance(self, x: np.ndarray) -> float:
-        """Rank 0: the smallest distance of the pairs nearer than d_hat (inf if none)."""
+        """Rank 0: the smallest SQUARED distance of the pairs nearer than d_hat (m^2, inf if
+        none): ipctk's ``compute_minimum_distance``, the quantity its stiffness update takes."""
         return float(self.collisions.compute_minimum_distance(self.mesh, x)) \
             if self.num_pairs else np.inf
 
@@ -424,7 +448,7 @@ class IPCContact:
             was lagged (IPC's normal force and tangent basis taken at x_n: 1 with friction).
         """
         x = self._update()
-        d = self._min_distance(x) if self.comm.rank == 0 else None
+        d = np.sqrt(self._min_distance(x)) if self.comm.rank == 0 else None  # ipctk's is d^2
         return {"barrier_stiffness": self.kappa, "dhat": self.dhat,
                 "contact_pairs": self.comm.bcast(self.num_pairs, root=0),
                 "min_distance": self.comm.bcast(d, root=0),

@@ -146,7 +146,8 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
             # a shell's layers stay its thickness apart (fem_anim.contact.contact_surface)
             offset = self.scene["shell"]["thickness"] if "shell" in self.scene.data else 0.0
             self.ipc = IPCContact(self.scene["contact"], self.u, pinned, names, self.cell_body,
-                                  offset)
+                                  offset,
+                                  (self.fields.W, self.fields.u_dofs) if self.mixed else None)
             self.average_mass = self.average_vertex_mass()
 
     # -- the step -------------------------------------------------------------------------

@@ -967,6 +967,57 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_contact.py::"
               "test_sheet_dropped_on_the_ground_rests_at_the_offset",),
              "a shell run's points read back as 2D"),
+    Mutation("p2-surface-wrong-split", "fem_anim/contact/p2_surface.py",
+             "((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))",
+             "((a, ab, bc), (ab, b, bc), (ca, bc, c), (ab, bc, ca))",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_splits_each_facet_on_its_midpoint_dofs",),
+             "a P2 facet's first sub-triangle takes the wrong midpoint dof"),
+    Mutation("ipc-mixed-rows-unmapped", "fem_anim/contact/ipc.py",
+             "rows = np.asarray(u_dofs)[rows].astype(np.int64)",
+             "rows = rows.astype(np.int64)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_barrier_taylor_on_p2_and_mixed_unknowns[mixed-0.5]",),
+             "the barrier's gradient of a mixed unknown goes to V's dof numbers, not w's"),
+    Mutation("ipc-mixed-hessian-on-v-rows", "fem_anim/contact/ipc.py",
+             "return rows, (np.asarray(nodes, np.int64) * bs + rows % bs).reshape(-1, g)",
+             "return rows, (self.blocks[:, None] + V.dofmap.index_map.local_range[0]) * g "
+             "+ np.arange(g)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_barrier_taylor_on_p2_and_mixed_unknowns[mixed-0.5]",),
+             "the barrier's Hessian of a mixed unknown goes to V's global rows, not w's"),
+    Mutation("intersection-p2-corners-only", "fem_anim/contact/intersection.py",
+             "    if cells.shape[1] == 4:\n        return unique[counts == 1]",
+             "    if True:\n        return unique[counts == 1]",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_splits_each_facet_on_its_midpoint_dofs",),
+             "the independent check sees a P2 body's facets unsplit (its corners only)"),
+    Mutation("mixed-contact-start-as-u", "fem_anim/simulation/newton_start.py",
+             "p.load_guess(guess, p.x_work, apply_bcs=False)",
+             "p.u.x.array[:] = guess\n        u.copy(p.x_work)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_incompressible_body_dropped_on_another",),
+             "the collision-free start of a mixed step is copied as a displacement into w"),
+    Mutation("preview-one-step-on-contact", "fem_anim/scene/modes.py",
+             'if mode == "preview" and _has_contact(raw):',
+             "if False:",
+             ("tests/test_preview_contact.py::"
+              "test_preview_on_the_pile_does_not_fail_or_gain_energy",),
+             "the preview's one Newton step per step on a contact scene (the pile fails at "
+             "step 1)"),
+    Mutation("p2-surface-2d-unsplit", "fem_anim/contact/p2_surface.py",
+             "np.stack([m, corners[:, 1]], 1)], 1)",
+             "np.stack([corners[:, 0], corners[:, 1]], 1)], 1)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_in_2d_splits_each_edge_at_its_midpoint_dof",),
+             "a 2D P2 boundary edge's second segment skips its midpoint dof"),
+    Mutation("mixed-contact-backtracking", "fem_anim/scene/modes.py",
+             "        _fill_petsc(solver, MIXED_CONTACT_PETSC)",
+             "        pass",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_incompressible_drop_impact_steps_are_not_retried",),
+             "a mixed scene with contact keeps backtracking on ||r||^2, which fails at the "
+             "impact"),
 ]
 
 
