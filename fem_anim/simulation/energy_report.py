@@ -109,7 +109,8 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
     friction = any(ob["friction"] > 0 for ob in scene["obstacle"]) or \
         ("contact" in scene.data and scene["contact"]["friction"] > 0)
     moving = moving_pins(scene)
-    conservative = not scene.damped and not friction and not moving
+    conservative = not scene.damped and not friction and not moving and \
+        "wind" not in scene.data  # a shell's drag dissipates
     e_end = rows[-1]["total_energy"] if rows else e0
     drift = excursion = None
     if exchanged > initial.get("roundoff", 0.0):

@@ -913,6 +913,29 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_safety.py::"
               "test_a_module_ready_without_its_lock_loads_instead_of_failing",),
              "a module ready without its lock recompiles and fails on .c.cached"),
+    # -- wind and drag on shells (forms/aerodynamic_drag.py) --
+    Mutation("drag-density-factor", "forms/aerodynamic_drag.py",
+             "    return drag_coefficient * air_density * abs(s) ** 3 / 6",
+             "    return drag_coefficient * air_density * abs(s) ** 3 / 3",
+             ("tests/test_wind.py::test_falling_flat_follows_the_drag_law_to_terminal_velocity",
+              "tests/test_wind.py::test_newmark_reaches_the_same_terminal_velocity"),
+             "the drag potential's 1/6 taken as 1/3: twice the drag C_d rho_a |s| s / 2"),
+    Mutation("drag-wind-sign", "forms/aerodynamic_drag.py",
+             "    s = ufl.dot(rate * (u - u_anchor) - wind, n0)",
+             "    s = ufl.dot(rate * (u - u_anchor) + wind, n0)",
+             ("tests/test_wind.py::test_falling_flat_follows_the_drag_law_to_terminal_velocity",),
+             "the relative velocity v + w instead of v - w (the wind blows the wrong way)"),
+    Mutation("drag-not-normal-projected", "forms/aerodynamic_drag.py",
+             "    s = ufl.dot(rate * (u - u_anchor) - wind, n0)",
+             "    s = ufl.sqrt(ufl.dot(rate * (u - u_anchor) - wind, rate * (u - u_anchor) - "
+             "wind) + 1e-30)",
+             ("tests/test_wind.py::test_edge_on_sheet_feels_no_drag",),
+             "the drag of the whole relative speed, not of its normal part (edge-on drag)"),
+    Mutation("drag-lag-rate", "forms/aerodynamic_drag.py",
+             "    rate = coefficient / weight  # 1 / tau",
+             "    rate = weight / coefficient  # 1 / tau",
+             ("tests/test_wind.py::test_falling_flat_follows_the_drag_law_to_terminal_velocity",),
+             "v_{n+1} = (u - u_d) tau instead of (u - u_d) / tau"),
 ]
 
 
