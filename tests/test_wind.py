@@ -147,6 +147,19 @@ render = false
 """
 
 
+def test_work_of_the_wind_is_not_flagged_as_a_gain(tmp_path):
+    """A sheet pinned on one edge, without gravity, blown by the wind: its total energy
+    rises from zero (the wind works on it) and the energy report does not flag that as the
+    scheme's gain."""
+    import json
+
+    code, err, rows = _run(tmp_path, "blown", FLAG.replace(
+        "[gravity]\nacceleration = [0.0, 0.0, -9.81]\n", ""))
+    assert code == 0, err
+    energy = json.loads((tmp_path / "blown" / "summary.json").read_text())["energy"]
+    assert energy["drift"] > 0.1 and not energy["gained"] and not energy["flagged"], energy
+
+
 @pytest.mark.mpi
 def test_two_ranks_equal_serial_in_wind(tmp_path):
     """A sheet pinned on one edge in a slanted wind: 2 ranks' energies and final
