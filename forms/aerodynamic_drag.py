@@ -71,8 +71,8 @@ def lagged_normal_area(u_n: Expr, J: Expr) -> tuple[Expr, Expr]:
 
 
 def drag_step_potential(u: Expr, u_anchor: Expr, u_n: Expr, wind: Expr, coefficient: Expr,
-                        weight: Expr, drag_coefficient, air_density, dx: ufl.Measure
-                        ) -> ufl.Form:
+                        weight: Expr, drag_coefficient, air_density, J: Expr,
+                        dx: ufl.Measure) -> ufl.Form:
     """``Psi(u) / w``: the drag's part of the step objective, divided by the weight ``w``.
 
     With ``tau = w / c``, ``Psi / w = tau int phi(((u - u_d) / tau - wind) . n_0) da_0``
@@ -88,16 +88,17 @@ def drag_step_potential(u: Expr, u_anchor: Expr, u_n: Expr, wind: Expr, coeffici
         weight: The energy weight ``w`` (staged per step).
         drag_coefficient: ``C_d``.
         air_density: ``rho_a`` (kg/m^3).
+        J: The rest Jacobian ``dX/dxi`` (3x2, ``ufl.Jacobian`` of the surface).
         dx: The cell measure of the surface.
     """
-    n0, area = lagged_normal_area(u_n, ufl.Jacobian(u.ufl_function_space().mesh.ufl_domain()))
+    n0, area = lagged_normal_area(u_n, J)
     rate = coefficient / weight  # 1 / tau
     s = ufl.dot(rate * (u - u_anchor) - wind, n0)
     return drag_density(s, drag_coefficient, air_density) / rate * area * dx
 
 
 def drag_force_potential(v: Expr, u: Expr, wind: Expr, drag_coefficient, air_density,
-                         dx: ufl.Measure) -> ufl.Form:
+                         J: Expr, dx: ufl.Measure) -> ufl.Form:
     """``int phi((v - wind) . n(u)) da(u)``: its derivative in ``v`` is ``-f``, the drag
     force at the velocity ``v`` on the surface deformed by ``u`` (for the initial
     acceleration ``M a_0 = f_0``).
@@ -108,7 +109,8 @@ def drag_force_potential(v: Expr, u: Expr, wind: Expr, drag_coefficient, air_den
         wind: The wind velocity (m/s).
         drag_coefficient: ``C_d``.
         air_density: ``rho_a`` (kg/m^3).
+        J: The rest Jacobian ``dX/dxi`` (3x2, ``ufl.Jacobian`` of the surface).
         dx: The cell measure of the surface.
     """
-    n, area = lagged_normal_area(u, ufl.Jacobian(u.ufl_function_space().mesh.ufl_domain()))
+    n, area = lagged_normal_area(u, J)
     return drag_density(ufl.dot(v - wind, n), drag_coefficient, air_density) * area * dx

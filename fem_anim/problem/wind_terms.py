@@ -24,6 +24,11 @@ from fem_anim.forms import aerodynamic_drag
 __all__ = ["WindDrag"]
 
 
+def _rest_jacobian(u: fem.Function):
+    """The rest Jacobian ``dX/dxi`` (3x2) of the surface ``u`` lives on."""
+    return ufl.Jacobian(u.function_space.mesh.ufl_domain())
+
+
 @dataclass
 class WindDrag:
     """The wind and drag law of a scene's ``[wind]``.
@@ -61,10 +66,11 @@ class WindDrag:
         """
         return aerodynamic_drag.drag_step_potential(
             u, u_anchor, u_n, self.velocity, coefficient, weight, self.drag_coefficient,
-            self.air_density, dx)
+            self.air_density, _rest_jacobian(u), dx)
 
     def force_potential(self, v, u, dx: ufl.Measure) -> ufl.Form:
         """``int phi((v - w) . n(u)) da(u)``, whose ``v``-derivative is minus the drag force
         (:func:`fem_anim.forms.aerodynamic_drag.drag_force_potential`)."""
         return aerodynamic_drag.drag_force_potential(v, u, self.velocity,
-                                                     self.drag_coefficient, self.air_density, dx)
+                                                     self.drag_coefficient, self.air_density,
+                                                     _rest_jacobian(u), dx)
