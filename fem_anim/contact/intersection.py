@@ -5,13 +5,27 @@ exterior facets; this check builds its own from the tetrahedra alone (the triang
 belong to one tetrahedron only), so a wrong surface there does not hide a crossing here,
 and asks ipctk's ``has_intersections`` of every frame. Demos and tests run it on the
 frames read back from ``trajectory.xdmf``.
+
+A shell (cells that are triangles) is its own surface, and is checked without ipctk:
+:func:`crossing_pairs` tests every pair of triangles that share no vertex (adjacent
+triangles meet along their shared edge or vertex by construction) and whose bounding boxes
+overlap (a sweep along x), in numpy, by the segment-triangle test: two such triangles cross
+iff an edge of one passes through the other (its ends on opposite sides of the other's
+plane, the crossing point inside it). Distances to a plane below 1e-10 of the scene's size
+count as zero. It takes any triangle soup, so a sheet and a solid's boundary triangles
+(:func:`boundary_triangles`) are checked together by stacking them. Exactly coplanar pairs
+(both ends of every edge on the other's plane) are not reported: the check is for crossings,
+which contact keeps the shell's thickness away from.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["boundary_triangles", "crossed_frames", "surface_collision_mesh"]
+__all__ = ["boundary_triangles", "crossed_frames", "crossing_pairs", "surface_collision_mesh"]
+
+#: Rows of the triangles compared at once in :func:`crossing_pairs` (bounds the memory).
+CHUNK = 256
 
 
 def boundary_triangles(cells: np.ndarray) -> np.ndarray:
@@ -28,17 +42,82 @@ def boundary_triangles(cells: np.ndarray) -> np.ndarray:
     return unique[counts == 1].astype(np.int32)
 
 
+def _segment_crosses(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray,
+                     c: np.ndarray, tol: float) -> np.ndarray:
+    """Whether segment pq passes through triangle abc (touching counts), row by row.
+
+    The ends' signed distances to the triangle's plane have opposite signs (a distance
+    below ``tol`` counts as zero; both zero: coplanar, not reported), and the point where pq
+    meets the plane has barycentric coordinates >= 0 in abc.
+    """
+    n = np.cross(b - a, c - a)
+    area2 = np.linalg.norm(n, axis=1)
+    sp, sq = (np.einsum("ij,ij->i", n, e - a) / area2 for e in (p, q))
+    sp[np.abs(sp) < tol], sq[np.abs(sq) < tol] = 0.0, 0.0
+    through_plane = (sp * sq <= 0) & ((sp != 0) | (sq != 0))
+    s = np.where(through_plane, sp / np.where(through_plane, sp - sq, 1.0), 0.0)
+    r = p + s[:, None] * (q - p) - a
+    e1, e2 = b - a, c - a
+    d11, d12, d22 = (np.einsum("ij,ij->i", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
+    r1, r2 = np.einsum("ij,ij->i", r, e1), np.einsum("ij,ij->i", r, e2)
+    det = d11 * d22 - d12 ** 2
+    beta, gamma = (d22 * r1 - d12 * r2) / det, (d11 * r2 - d12 * r1) / det
+    eps = 1e-12
+    inside = (beta >= -eps) & (gamma >= -eps) & (beta + gamma <= 1 + eps)
+    return through_plane & inside
+
+
+def crossing_pairs(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Pairs of triangles sharing no vertex that cross each other (module docstring).
+
+    Args:
+        x: Vertex positions, (vertices, 3).
+        triangles: (triangles, 3) vertex indices.
+
+    Returns:
+        (pairs, 2) indices i < j of the crossing triangles (empty: no intersection).
+    """
+    order = np.argsort(x[triangles].min(axis=1)[:, 0], kind="stable")  # sweep along x
+    tri = np.asarray(triangles, dtype=np.int64)[order]
+    corners = x[tri]  # (T, 3, 3)
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    tol = 1e-10 * float(np.linalg.norm(np.ptp(x, axis=0)))  # round-off of the positions
+    found = []
+    for start in range(0, tri.shape[0], CHUNK):
+        rows = np.arange(start, min(start + CHUNK, tri.shape[0]))
+        # later triangles (in x order) that start before the chunk ends along x
+        cols = np.arange(start, np.searchsorted(lo[:, 0], hi[rows, 0].max(), side="right"))
+        overlap = np.all((lo[rows, None] <= hi[None, cols]) & (lo[None, cols] <= hi[rows, None]),
+                         axis=2)
+        overlap &= rows[:, None] < cols[None]
+        i, j = np.nonzero(overlap)
+        i, j = rows[i], cols[j]
+        shared = (tri[i][:, :, None] == tri[j][:, None, :]).any(axis=(1, 2))
+        i, j = i[~shared], j[~shared]
+        hit = np.zeros(i.size, bool)
+        for s, t in ((i, j), (j, i)):  # an edge of s through triangle t
+            a, b, c = (corners[t, k] for k in range(3))
+            for e0, e1 in ((0, 1), (1, 2), (2, 0)):
+                hit |= _segment_crosses(corners[s, e0], corners[s, e1], a, b, c, tol)
+        pairs = np.sort(order[np.stack([i[hit], j[hit]], axis=1)], axis=1)
+        found.append(pairs)
+    return np.concatenate(found) if found else np.empty((0, 2), np.int64)
+
+
 def crossed_frames(points: np.ndarray, cells: np.ndarray, frames) -> list[int]:
     """Indices of the frames where a surface triangle crosses another.
 
     Args:
         points: The rest positions of the vertices, (vertices, 3).
-        cells: The tetrahedra, (cells, 4) vertex indices.
+        cells: The tetrahedra, (cells, 4) vertex indices, or a shell's triangles, (cells, 3).
         frames: An iterable of displacements, each (vertices, 3), in vertex order.
 
     Returns:
-        The indices k of ``frames`` where ipctk's ``has_intersections`` is true.
+        The indices k of ``frames`` where ipctk's ``has_intersections`` is true (solids), or
+        where :func:`crossing_pairs` finds a pair (a shell's triangles).
     """
+    if cells.shape[1] == 3:
+        return [k for k, u in enumerate(frames) if len(crossing_pairs(points + u, cells))]
     import ipctk
 
     mesh, used = surface_collision_mesh(points, cells)
