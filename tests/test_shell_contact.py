@@ -157,7 +157,8 @@ def _u_fold(path, length=0.1, gap=0.02, width=0.06, h=0.02):
                                           length - (s - length - gap)))
     z = np.where(s <= length, 0.0, np.where(s <= length + gap, s - length, gap))
     points = np.c_[x, flat[:, 1], z]
-    lines = [f"v {p[0]!r} {p[1]!r} {p[2]!r}" for p in points]
+    # repr of Python floats (numpy 2 writes np.float64(...) for its own scalars)
+    lines = ["v " + " ".join(repr(float(c)) for c in p) for p in points]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in cells]
     path.write_text("\n".join(lines) + "\n")
     return points
