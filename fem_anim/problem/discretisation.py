@@ -31,6 +31,7 @@ from fem_anim.forms.time_schemes import SCHEMES
 from fem_anim.mesh.bodies import body_regions
 from fem_anim.problem.mixed_space import MixedFields
 from fem_anim.problem.shell_terms import ShellEnergy, shell_measures, shell_thickness
+from fem_anim.problem.wind_terms import WindDrag
 
 __all__ = ["Discretisation", "default_quadrature_degree"]
 
@@ -127,3 +128,5 @@ class Discretisation:
             _, self.dS_shell = shell_measures(mesh)
             self.dx_shell = self.dx_mass
             self.elastic_terms = []
+        #: ``[wind]``: a shell's aerodynamic drag (fem_anim.problem.wind_terms)
+        self.wind = WindDrag.from_scene(scene, mesh) if "wind" in scene.data else None

@@ -123,6 +123,10 @@ class EnergyTerms:
             if self.contact.friction is not None:
                 potential += self._of_unknown(self.contact.friction)
                 varying += self.contact.friction
+        if self.wind is not None:  # drag: a dissipation with the geometry of u_n, in w E
+            drag = self.wind.step_potential(self.u, self.u_anchor, self.u_prev,
+                                            self.damping_coefficient, self.weight, self.dx_shell)
+            potential, varying = potential + drag, varying + drag
         terms = StepTerms(elastic_u, gravity_u, potential_u, potential, varying, contact_terms)
         terms.convex = inertia_forms.inertia(u_obj, self.u_pred, self.rho, self.dx_mass)
         return terms
@@ -149,6 +153,9 @@ class EnergyTerms:
             zero = ufl.as_vector([0.0] * d)
             ufl_forms["damping_force"] = ufl.derivative(
                 self._dissipation(self.v, zero, 1.0), self.v, dv_V)
+        if self.wind is not None:  # f(v) at (u, v), for the initial acceleration
+            ufl_forms["drag_force"] = ufl.derivative(
+                self.wind.force_potential(self.v, self.u, self.dx_shell), self.v, dv_V)
         objective = terms.objective = step_objective(terms.convex, terms.potential,
                                                      self.weight)
         #: the inertia, damping and gravity terms as matrices and a vector assembled once
