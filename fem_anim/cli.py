@@ -9,7 +9,7 @@ Usage::
     fem-anim solvers
     fem-anim bench [SCENE.toml] [--sweep KEY=V1,V2,...]... [--repeats N] [--reference KEY=V]...
                    [-o OUTDIR] | --extremes [--full] | --perf ... | --hard [--reduced]
-                   | --contact [--size full|reduced]
+                   | --contact [--size full|small|reduced]
     fem-anim fit [SCENE.toml] --target RUN --param KEY [--param KEY ...] [--bounds ...] [-o OUTDIR]
 
 ``run`` simulates a scene (each time step minimises the step objective g(x) of seed

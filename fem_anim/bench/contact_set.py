@@ -1,6 +1,7 @@
 """``fem-anim bench --contact``: the classic contact set, fem_anim beside the plain IPC step.
 
-    fem-anim bench --contact [--size full|reduced] [--only NAME,...] [--steps N] [--out DIR]
+    fem-anim bench --contact [--size full|small|reduced] [--only NAME,...] [--steps N]
+                             [--out DIR] [--no-pictures]
     (or python -m fem_anim.bench.contact_set ...)
 
 Three scenes (:func:`scene_text`), each run by fem_anim (serial, the scene's defaults, its
@@ -23,7 +24,9 @@ the frames (the largest difference between the two runs), and crossed frames (ip
 :func:`fem_anim.contact.intersection.crossed_frames`) for both. Writes into ``--out``
 (default ``demos/results/contact_set``): per-step CSVs of each run (every number of the
 table is recomputed from them by :func:`summarise`), ``contact_set.json``, the Markdown
-table ``contact_set.md`` and a small picture of each scene's last frame per run.
+table ``contact_set.md`` and a small picture of each scene's last frame per run. A run of
+some scenes (``--only``) keeps the other scenes' entries of the same size already in
+``contact_set.json`` (each with the command and machine line it was measured with).
 """
 
 from __future__ import annotations
@@ -45,9 +48,12 @@ __all__ = ["SCENES", "SIZES", "scene_text", "run_scene", "summarise", "main",
            "COM_TOLERANCE"]
 
 SCENES = ("stack", "pile", "twist")
-#: Per size: scene -> (bodies or turns, element size (m), frames)
+#: Per size: scene -> (bodies, element size (m), frames). ``full`` is the set as specified;
+#: ``small`` the same bodies and durations (the pile 1 s) on coarser meshes, for a loaded
+#: machine; ``reduced`` the test's (few bodies, coarse, few frames).
 SIZES = {
     "full": {"stack": (10, 0.025, 500), "pile": (20, 0.02, 200), "twist": (1, 0.01, 200)},
+    "small": {"stack": (10, 0.05, 500), "pile": (20, 0.03, 100), "twist": (1, 0.02, 200)},
     "reduced": {"stack": (3, 0.05, 8), "pile": (4, 0.03, 8), "twist": (1, 0.03, 8)},
 }
 #: The largest centre-of-mass height difference (m) between the two runs called agreement.
@@ -74,7 +80,7 @@ def scene_text(name: str, size: str = "full", steps: int | None = None) -> str:
 
     Args:
         name: One of :data:`SCENES`.
-        size: ``"full"`` or ``"reduced"``.
+        size: A key of :data:`SIZES`.
         steps: Frames (default: the size's).
     """
     count, h, frames = SIZES[size][name]
@@ -236,16 +242,21 @@ def _csv(rows: list[dict]) -> bytes:
     return table.getvalue().encode()
 
 
-def _picture(path: Path, points, cells, u, title: str) -> None:
-    """A small PNG of the surface at displacement u (off screen)."""
+def _picture(path: Path, points, cells, body, u, title: str) -> None:
+    """A small PNG of the surface at displacement u, a colour per body (off screen)."""
+    if not os.environ.get("DISPLAY"):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import pyvista as pv
 
     from fem_anim.contact.intersection import boundary_triangles
 
     faces = boundary_triangles(cells)
     surf = pv.PolyData(points + u, np.hstack([np.full((len(faces), 1), 3), faces]).ravel())
+    vertex_body = np.zeros(points.shape[0])
+    vertex_body[cells.ravel()] = np.repeat(body % 10, 4)
     plotter = pv.Plotter(off_screen=True, window_size=(320, 320))
-    plotter.add_mesh(surf, color="#d9a066", show_edges=True, edge_color="#553311",
+    plotter.add_mesh(surf, scalars=vertex_body, cmap="tab10", clim=[0, 9],
+                     show_scalar_bar=False, show_edges=True, edge_color="#333333",
                      line_width=0.5)
     plotter.add_text(title, font_size=9)
     plotter.view_isometric()
@@ -312,9 +323,9 @@ def _run_scene(name, size, out, steps, pictures, log) -> dict:
                         fem_anim=np.array(fa_shots), baseline=np.array(bl_shots))
     write_product(out / f"{name}_frames.npz", buffer.getvalue())
     if pictures:
-        _picture(out / f"{name}_fem_anim.png", points, cells, fa_shots[-1],
+        _picture(out / f"{name}_fem_anim.png", points, cells, body, fa_shots[-1],
                  f"{name}: fem_anim, t = {frames * DT:.2f} s")
-        _picture(out / f"{name}_baseline.png", points, cells, bl_shots[-1],
+        _picture(out / f"{name}_baseline.png", points, cells, body, bl_shots[-1],
                  f"{name}: ipctk+scipy, t = {frames * DT:.2f} s")
     entry = {"scene": name, "size": size, "frames": frames, "tets": int(cells.shape[0]),
              "bodies": int(body.max()) + 1,
@@ -351,6 +362,17 @@ def table(entries: list[dict]) -> str:
                      "COM height diff (mm)"], rows)
 
 
+def _kept_entries(path: Path, names: list[str], size: str) -> dict:
+    """The entries of an earlier ``contact_set.json`` in ``path`` of the same size for the
+    scenes not run now (each keeps its own command and machine line), by scene."""
+    try:
+        entries = json.loads(path.read_text())["scenes"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+    return {e["scene"]: e for e in entries if isinstance(e, dict)
+            and e.get("size") == size and e.get("scene") in SCENES and e["scene"] not in names}
+
+
 def main(argv: list[str] | None = None) -> int:
     from fem_anim.bench.report import machine_text
     from fem_anim.console import OneLineParser, print_error
@@ -378,16 +400,19 @@ def main(argv: list[str] | None = None) -> int:
                                                 "_frames.npz", "_fem_anim.png",
                                                 "_baseline.png")]
         check_may_write(out, products)
-        entries = [run_scene(n, args.size, out, args.steps, not args.no_pictures)
-                   for n in names]
-        load = f"{os.getloadavg()[0]:.1f}"
-        command = "fem-anim bench --contact " + " ".join(
-            (argv if argv is not None else sys.argv[1:]))
-        text = (f"Measured {machine_text(load)}; regenerate: `{command.strip()}`.\n\n"
-                + table(entries))
+        command = ("fem-anim bench --contact " + " ".join(
+            argv if argv is not None else sys.argv[1:])).strip()
+        kept = _kept_entries(out / "contact_set.json", names, args.size)
+        for n in names:
+            entry = run_scene(n, args.size, out, args.steps, not args.no_pictures)
+            load = f"{os.getloadavg()[0]:.1f}"
+            kept[n] = {**entry, "command": command, "machine": machine_text(load)}
+        entries = [kept[n] for n in SCENES if n in kept]
+        notes = "\n".join(f"* {e['scene']}: measured {e['machine']}; regenerate: "
+                          f"`{e['command']}`." for e in entries)
+        text = notes + "\n\n" + table(entries)
         write_product(out / "contact_set.json",
-                      json.dumps({"command": command.strip(), "load": load,
-                                  "scenes": entries}, indent=1).encode())
+                      json.dumps({"scenes": entries}, indent=1).encode())
         write_product(out / "contact_set.md", (text + "\n").encode())
         print(text)
         return 0

@@ -16,9 +16,8 @@ obstacle stiffness), B the IPC Toolkit's area-weighted physical barrier between 
 friction (IPC section 5: normal forces and tangent bases at x_n, ipctk's
 ``FrictionPotential`` between surfaces, the obstacles' own as fem_anim's). Newton's method:
 
-* the Hessian is the sum of the per-element Hessians w_e G_e^T (dP/dF)^+ G_e, each PSD by
-  the projection of its 9 x 9 dP/dF (eigenvalues clamped at 0; cheaper than projecting the
-  12 x 12 element Hessian, and as common), the barrier's and friction's per-pair projections (ipctk's ``CLAMP``) and
+* the Hessian is the sum of the per-element Hessians each projected to PSD (eigenvalues
+  clamped at 0), the barrier's and friction's per-pair projections (ipctk's ``CLAMP``) and
   the lumped mass; the Newton direction p solves it on the free dofs (scipy's SuperLU);
 * the line search starts from the largest collision-free step along p (ipctk's
   tight-inclusion CCD between surfaces; a vertex may close at most 90 % of its gap to a
@@ -236,8 +235,8 @@ class IPCBaseline:
         P = first_piola("neohookean", F, self.mu, self.lmbda)
         A = first_piola_derivative("neohookean", F, self.mu, self.lmbda)
         local_g = np.einsum("n,nij,ni->nj", self.vol, self.G, vec(P))
-        local_H = np.einsum("n,npi,npq,nqj->nij", self.vol, self.G, psd_project(A), self.G,
-                            optimize=True)
+        local_H = psd_project(np.einsum("n,npi,npq,nqj->nij", self.vol, self.G, A, self.G,
+                                        optimize=True))
         grad = self.mass * (x - self.y) + self.h2 * (
             np.bincount(self.dofs.ravel(), weights=local_g.ravel(), minlength=self.ndof)
             - self.force)
