@@ -118,8 +118,14 @@ def test_reduced_set_numbers_recompute(reduced_set):
                          rf"\| {ratio:.2f} \|", table)
         com = [cs._com_heights(points, cells, body, data[who])
                for who in ("fem_anim", "baseline")]
-        assert e["com_height_max_diff_m"] == pytest.approx(np.max(np.abs(com[0] - com[1])),
-                                                           rel=1e-12, abs=1e-15)
+        diff = np.max(np.abs(com[0] - com[1]), axis=1)
+        assert e["com_height_max_diff_m"] == pytest.approx(diff.max(), rel=1e-12, abs=1e-15)
+        assert e["com_height_final_diff_m"] == pytest.approx(diff[-1], rel=1e-12, abs=1e-15)
+        assert e["mean_height_final_diff_m"] == pytest.approx(
+            abs(com[0][-1].mean() - com[1][-1].mean()), rel=1e-12, abs=1e-15)
+        inside = diff <= cs.COM_TOLERANCE
+        assert e["agree_until_s"] == pytest.approx(
+            cs.DT * ((np.argmin(inside) if not inside.all() else inside.size) - 1))
 
 
 def test_reduced_set_same_physics(reduced_set):
@@ -144,3 +150,16 @@ def test_full_set(tmp_path):
     summary = json.loads((tmp_path / "contact_set.json").read_text())
     for e in summary["scenes"]:
         assert e["fem_anim"]["crossed_frames"] == e["baseline"]["crossed_frames"] == 0
+
+
+def test_physics_check_agreement_time():
+    a = np.zeros((6, 2))
+    b = a.copy()
+    b[3:, 1] = [0.5, 3.0, 1.0]  # mm-scale differences: within 2 mm until frame 3
+    b *= 1e-3
+    got = cs.physics_check(a, b, dt=0.1)
+    assert got["agree_until_s"] == pytest.approx(0.3)
+    assert got["com_height_max_diff_m"] == pytest.approx(3e-3)
+    assert got["com_height_final_diff_m"] == pytest.approx(1e-3)
+    assert got["mean_height_final_diff_m"] == pytest.approx(0.5e-3)
+    assert cs.physics_check(a, a, dt=0.1)["agree_until_s"] == pytest.approx(0.5)
