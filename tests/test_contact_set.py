@@ -163,3 +163,14 @@ def test_physics_check_agreement_time():
     assert got["com_height_final_diff_m"] == pytest.approx(1e-3)
     assert got["mean_height_final_diff_m"] == pytest.approx(0.5e-3)
     assert cs.physics_check(a, a, dt=0.1)["agree_until_s"] == pytest.approx(0.5)
+
+
+def test_com_heights_file(reduced_set):
+    out, summary = reduced_set
+    for e in summary["scenes"]:
+        rows = _rows(out / f"{e['scene']}_com_heights.csv")
+        fa = np.array([float(r["fem_anim_m"]) for r in rows]).reshape(e["frames"] + 1, -1)
+        bl = np.array([float(r["baseline_m"]) for r in rows]).reshape(e["frames"] + 1, -1)
+        assert fa.shape[1] == e["bodies"]
+        assert cs.physics_check(fa, bl)["com_height_max_diff_m"] == pytest.approx(
+            e["com_height_max_diff_m"], rel=1e-9, abs=1e-15)
