@@ -101,7 +101,7 @@ def test_p2_surface_splits_each_facet_on_its_midpoint_dofs():
     facets = dmesh.exterior_facet_indices(mesh.topology)
     f_to_v = mesh.topology.connectivity(tdim - 1, 0).array.reshape(-1, tdim)
     c_to_v = mesh.topology.connectivity(tdim, 0).array.reshape(-1, tdim + 1)
-    faces, parent = surface_faces(V, facets, f_to_v, c_to_v)
+    faces, parent = surface_faces(V, f_to_v[facets], c_to_v)
     assert faces.shape == (4 * facets.size, 3)
     assert np.array_equal(parent, np.repeat(np.arange(facets.size), 4))
     X = V.tabulate_dof_coordinates()
@@ -256,7 +256,7 @@ def test_p2_surface_in_2d_splits_each_edge_at_its_midpoint_dof():
     facets = dmesh.exterior_facet_indices(mesh.topology)
     f_to_v = mesh.topology.connectivity(1, 0).array.reshape(-1, 2)
     c_to_v = mesh.topology.connectivity(2, 0).array.reshape(-1, 3)
-    faces, parent = surface_faces(V, facets, f_to_v, c_to_v)
+    faces, parent = surface_faces(V, f_to_v[facets], c_to_v)
     assert faces.shape == (2 * facets.size, 2)
     X = V.tabulate_dof_coordinates()[:, :2]
     v_to_geo = np.empty(c_to_v.max() + 1, np.int64)

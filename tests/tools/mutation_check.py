@@ -1045,6 +1045,21 @@ MUTATIONS: list[Mutation] = [
               "test_incompressible_drop_impact_steps_are_not_retried",),
              "a mixed scene with contact keeps backtracking on ||r||^2, which fails at the "
              "impact"),
+    Mutation("baseline-friction-unweighted", "fem_anim/bench/ipc_baseline.py",
+             "gb = gb + self.h2 * self.friction.gradient(",
+             "gb = gb + self.friction.gradient(",
+             ("tests/test_contact_set.py::test_baseline_gradient_and_hessian",),
+             "the baseline's friction gradient misses the h^2 its objective carries"),
+    Mutation("contact-set-com-compared-with-itself", "fem_anim/bench/contact_set.py",
+             "diff = np.max(np.abs(com_fa - com_bl), axis=1)",
+             "diff = np.max(np.abs(com_fa - com_fa), axis=1)",
+             ("tests/test_contact_set.py::test_reduced_set_numbers_recompute",),
+             "the physics check compares fem_anim's centre-of-mass heights with themselves"),
+    Mutation("contact-set-ipc-share-of-accepted", "fem_anim/bench/contact_set.py",
+             '"ipc_share": sum(float(r["ipc_s"]) for r in rows) / wall,',
+             '"ipc_share": sum(float(r["ipc_s"]) for r in rows) / own,',
+             ("tests/test_contact_set.py::test_reduced_set_numbers_recompute",),
+             "the IPC share is taken of the accepted substeps' time, not the wall time"),
 ]
 
 
