@@ -281,15 +281,33 @@ class EnergyTerms:
         points, _ = compat.reference_quadrature(cell, self.quadrature_degree)
         return points
 
-    def _quadrature_data(self, name: str, expression, evaluate, in_shape, out_shape
-                         ) -> QuadratureData:
-        """A quadrature Function filled by ``evaluate(expression)`` on every update."""
+    def _quadrature_data(self, name: str, expression, evaluate, in_shape, out_shape,
+                         cells: np.ndarray | None = None) -> QuadratureData:
+        """A quadrature Function filled by ``evaluate(expression)`` on every update (on
+        ``cells`` only, if given)."""
         Q = compat.quadrature_space(self.domain.mesh, self.quadrature_degree, out_shape)
         index_map = self.domain.mesh.topology.index_map(self.d)
         return QuadratureData(fem.Function(Q, name=name),
                               compat.expression(expression, self._quadrature_points(),
                                                 JIT_OPTIONS),
-                              evaluate, index_map.size_local + index_map.num_ghosts, in_shape)
+                              evaluate, index_map.size_local + index_map.num_ghosts, in_shape,
+                              cells)
+
+    def _cells_reading(self, key: str) -> np.ndarray | None:
+        """The local cells whose material's psi reads the extra data ``key``
+        (:data:`~fem_anim.forms.material.EXTRA_DATA`), None for every cell.
+
+        With several material models each is integrated over its own tagged cells
+        (``elastic_terms``), so the data of a corotated body's SVD is read there alone; on a
+        pile of four bodies, one of them corotated, the others' cells need none.
+        """
+        cells = self.material_map
+        index_map = self.domain.mesh.topology.index_map(self.d)
+        if cells is None or len(cells.models) == 1 or \
+                cells.cell_model.size != index_map.size_local + index_map.num_ghosts:
+            return None
+        reads = np.array([key in get_material(m).needs(self.d) for m in cells.models])
+        return None if reads.all() else np.flatnonzero(reads[cells.cell_model]).astype(np.int32)
 
     def _psi(self, u, F=None, material=None):
         """A material's psi of F(u) (or of a given F), with its quadrature data."""
@@ -301,7 +319,8 @@ class EnergyTerms:
             for key in needs:
                 data = EXTRA_DATA[key]
                 q = self._quadrature_data(key, deformation_gradient(u), data.evaluate,
-                                          (self.d, self.d), data.value_shape(self.d))
+                                          (self.d, self.d), data.value_shape(self.d),
+                                          self._cells_reading(key))
                 self.quadrature_data.append(q)
                 self._extra[u][data.keyword] = q.function
         extra = {data.keyword: self._extra[u][data.keyword]
