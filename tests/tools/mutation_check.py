@@ -1060,6 +1060,18 @@ MUTATIONS: list[Mutation] = [
              '"ipc_share": sum(float(r["ipc_s"]) for r in rows) / own,',
              ("tests/test_contact_set.py::test_reduced_set_numbers_recompute",),
              "the IPC share is taken of the accepted substeps' time, not the wall time"),
+    Mutation("quadrature-data-on-every-cell", "fem_anim/problem/energy_terms.py",
+             "return None if reads.all() else np.flatnonzero(",
+             "return None if True else np.flatnonzero(",
+             ("tests/test_regions.py::"
+              "test_corotated_data_is_computed_only_where_corotated_cells_read_it",),
+             "corotated's SVD evaluated on every cell of a multi-material mesh again (slow)"),
+    Mutation("quadrature-data-on-wrong-cells", "fem_anim/problem/energy_terms.py",
+             "np.flatnonzero(reads[cells.cell_model])",
+             "np.flatnonzero(~reads[cells.cell_model])",
+             ("tests/test_regions.py::"
+              "test_two_region_assembly_matches_reference[3-groups-and-box-three-models]",),
+             "corotated's stretch trace computed on the other materials' cells instead"),
 ]
 
 
