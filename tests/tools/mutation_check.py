@@ -1072,6 +1072,11 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_regions.py::"
               "test_two_region_assembly_matches_reference[3-groups-and-box-three-models]",),
              "corotated's stretch trace computed on the other materials' cells instead"),
+    Mutation("min-distance-squared", "fem_anim/contact/ipc.py",
+             "d = np.sqrt(self._min_distance(x))", "d = (self._min_distance(x))",
+             ("tests/test_newton_pace.py::"
+              "test_min_distance_is_the_smallest_pair_distance_in_metres",),
+             "stats.csv's min_distance is ipctk's squared distance (m^2 shown as m)"),
 ]
 
 
