@@ -1077,6 +1077,11 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_newton_pace.py::"
               "test_min_distance_is_the_smallest_pair_distance_in_metres",),
              "stats.csv's min_distance is ipctk's squared distance (m^2 shown as m)"),
+    Mutation("contact-start-without-predictor", "fem_anim/simulation/newton_start.py",
+             "    p.u.x.array[:] = u_pred", "    p.u.x.array[:] = u_last",
+             ("tests/test_newton_pace.py::"
+              "test_landing_stack_keeps_newton_iterations_low_with_the_predictor_start",),
+             "a contact step starts Newton at x_n, not the previous velocity's predictor"),
 ]
 
 
