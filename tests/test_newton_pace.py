@@ -73,9 +73,12 @@ def test_min_distance_is_the_smallest_pair_distance_in_metres():
 def test_landing_stack_keeps_newton_iterations_low_with_the_predictor_start():
     """Two coarse cubes, the lower one landing on the ground, the upper one on it (16 steps,
     implicit Euler, friction): Newton starts from the predictor x_n + h v_n cut by the CCD
-    (the previous step's velocity), so the landings take at most 10 iterations a step and
-    at most 4 on average (8 and 3.69 measured); started from x_n the upper cube's landing
-    takes 12. Each step still meets IPC's step test with its force check (reason 5)."""
+    (the previous step's velocity), and the barrier's exact Hessian takes over once a full
+    step is below 100x the stopping test's size, so the landings take at most 10 iterations
+    a step and at most 3.5 on average (7 and 3.31 measured), and the stack, at rest from
+    step 11, 2 a step. Started from x_n the upper cube's landing takes 11; with the exact
+    Hessian only at the test's size (before) steps 11-14 take 3. Each step still meets IPC's
+    step test with its force check (reason 5)."""
     sim = Simulation(Scene.from_toml(STACK.format(steps=16)))
     state = sim.initial_state()
     its = []
@@ -84,4 +87,5 @@ def test_landing_stack_keeps_newton_iterations_low_with_the_predictor_start():
         its.append(stats.newton_its)
         assert stats.reason == 5
     sim.minimiser.destroy()
-    assert max(its) <= 10 and sum(its) / len(its) <= 4.0, its
+    assert max(its) <= 10 and sum(its) / len(its) <= 3.5, its
+    assert max(its[10:]) <= 2, its

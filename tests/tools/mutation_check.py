@@ -1082,6 +1082,11 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_newton_pace.py::"
               "test_landing_stack_keeps_newton_iterations_low_with_the_predictor_start",),
              "a contact step starts Newton at x_n, not the previous velocity's predictor"),
+    Mutation("exact-barrier-hessian-only-at-test-size", "fem_anim/solver/minimiser.py",
+             "EXACT_NEAR = 100.0", "EXACT_NEAR = 1.0",
+             ("tests/test_newton_pace.py::"
+              "test_landing_stack_keeps_newton_iterations_low_with_the_predictor_start",),
+             "the barrier's exact Hessian only once a step meets the test (3 iterations at rest)"),
 ]
 
 
