@@ -6,7 +6,7 @@ that read it alone, and as now (also the exact Hessian from 100x the test's size
 Run from the repository root (docs/contact.md, "Where a pile's Newton iterations and
 seconds go"):
 
-    .venv/bin/python docs/contact_scenes/newton_pace.py demos/pile.toml 60 [REPS] [--set KEY=VALUE ...]
+    .venv/bin/python docs/contact_scenes/newton_pace.py SCENE STEPS [REPS] [--set KEY=VALUE]
 
 With ``--profile`` instead, the current code's cProfile of steps 6 to the last (top 25 by
 own time); with ``--trace 3,19,44`` each listed step's Newton iterations: the full step's
@@ -14,9 +14,10 @@ infinity norm, the CCD's bound on it, ||r|| over the largest force term at the i
 the line search's alpha (the accepted step over the bounded direction). ``--before`` profiles or
 traces the variant "before".
 
-Otherwise prints, per variant and repetition, Newton iterations a step, seconds a step (wall clock of
-``Simulation.step``), the time in the quadrature data's refresh, and the largest difference of
-the final displacement from the first variant's (0 for the quadrature change alone: the same
+Otherwise prints, per variant and repetition, Newton iterations a step, seconds a step
+(wall clock of ``Simulation.step``, and this process's CPU time, steadier on a shared
+machine), the time in the quadrature data's refresh, and the largest difference of the
+final displacement from the first variant's (0 for the quadrature change alone: the same
 result; the Hessian change takes other iterates within the stopping test).
 """
 
@@ -57,13 +58,13 @@ def run(scene, steps: int, every_cell: bool, near: float):
     state = sim.initial_state()
     h = scene["time"]["dt"]
     its, spent[0] = 0, 0.0
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         state, stats = sim.step(state, h)
         its += stats.newton_its
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     sim.minimiser.destroy()
-    return its / steps, wall / steps, spent[0] / steps, state.u.copy()
+    return its / steps, (wall / steps, cpu / steps), spent[0] / steps, state.u.copy()
 
 
 def profile(scene, steps: int) -> None:
@@ -135,7 +136,8 @@ def main(argv: list[str]) -> None:
     for rep in range(reps):
         for name, (every_cell, near) in VARIANTS.items():
             its, per_step, refresh, finals[name] = run(scene, steps, every_cell, near)
-            print(f"rep {rep}: {name}: {its:.2f} Newton its/step, {per_step:.3f} s/step, "
+            print(f"rep {rep}: {name}: {its:.2f} Newton its/step, {per_step[0]:.3f} s/step "
+                  f"(CPU {per_step[1]:.3f} s/step), "
                   f"quadrature data {refresh:.3f} s/step, final displacement differs from "
                   f"before's by {np.max(np.abs(finals[name] - finals['before'])):.3g} m",
                   flush=True)
