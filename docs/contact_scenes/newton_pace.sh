@@ -1,3 +1,8 @@
+#!/bin/bash
+# Side-by-side Newton iterations and seconds of a contact scene (docs/contact.md, "Where a
+# pile's Newton iterations and seconds go); the Python below says how. Run from the
+# repository root: bash docs/contact_scenes/newton_pace.sh SCENE STEPS [REPS] [--set KEY=VALUE]
+exec .venv/bin/python - "$@" <<'PY'
 """Side by side, in one process, a scene stepped three ways: as before this page's changes
 (corotated's quadrature data, a batched SVD, on every cell; the barrier's exact Hessian only
 once a Newton step meets the stopping test's size), with the quadrature data on the cells
@@ -6,7 +11,7 @@ that read it alone, and as now (also the exact Hessian from 100x the test's size
 Run from the repository root (docs/contact.md, "Where a pile's Newton iterations and
 seconds go"):
 
-    .venv/bin/python docs/contact_scenes/newton_pace.py SCENE STEPS [REPS] [--set KEY=VALUE]
+    bash docs/contact_scenes/newton_pace.sh SCENE STEPS [REPS] [--set KEY=VALUE]
 
 With ``--profile`` instead, the current code's cProfile of steps 6 to the last (top 25 by
 own time); with ``--trace 3,19,44`` each listed step's Newton iterations: the full step's
@@ -145,3 +150,4 @@ def main(argv: list[str]) -> None:
 
 if __name__ == "__main__":
     main(sys.argv[1:])
+PY
