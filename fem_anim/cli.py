@@ -9,6 +9,7 @@ Usage::
     fem-anim solvers
     fem-anim bench [SCENE.toml] [--sweep KEY=V1,V2,...]... [--repeats N] [--reference KEY=V]...
                    [-o OUTDIR] | --extremes [--full] | --perf ... | --hard [--reduced]
+                   | --contact [--size full|small|reduced]
     fem-anim fit [SCENE.toml] --target RUN --param KEY [--param KEY ...] [--bounds ...] [-o OUTDIR]
 
 ``run`` simulates a scene (each time step minimises the step objective g(x) of seed
@@ -71,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", add_help=False,
                            help="trade study (SCENE --sweep KEY=V1,V2 ...; -h for its options), "
                            "--extremes (stability suite), --perf (performance bench) or "
-                           "--hard (hard scenes x Hessian modes)")
+                           "--hard (hard scenes x Hessian modes) or --contact (the contact "
+                           "set beside a plain ipctk + scipy IPC step)")
     bench.add_argument("bench_args", nargs=argparse.REMAINDER)
     fit = sub.add_parser("fit", add_help=False,
                          help="fit scene parameters to a reference run by the discrete adjoint "
@@ -198,8 +200,8 @@ def _render(args) -> int:
 
 
 def _bench(argv: list[str]) -> int:
-    """``fem-anim bench``: the trade study, or with ``--extremes`` / ``--perf`` / ``--hard``
-    another bench (``--perf --hard`` is the perf bench's 60k run)."""
+    """``fem-anim bench``: the trade study, or with ``--extremes`` / ``--perf`` / ``--hard`` /
+    ``--contact`` another bench (``--perf --hard`` is the perf bench's 60k run)."""
     if "--perf" in argv:
         from fem_anim.bench import perf
 
@@ -208,6 +210,10 @@ def _bench(argv: list[str]) -> int:
         from fem_anim.bench import hard
 
         return hard.main([a for a in argv if a != "--hard"])
+    if "--contact" in argv:
+        from fem_anim.bench import contact_set
+
+        return contact_set.main([a for a in argv if a != "--contact"])
     if "--extremes" in argv:
         from fem_anim.bench import extremes
 

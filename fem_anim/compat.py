@@ -30,6 +30,8 @@ between them is wrapped here, in the package and in the tests alike
     ``fem.FormMetaClass(ufcx, V, w, c, ...)``   ``form_cpp_class(dtype)(ptr, V, w, c, ...)``; ``Form``
     ``ufcx_form.original_coefficient_position`` ``original_coefficient_positions``
     ``set_bc(scale=)``, ``apply_lifting(...)``  ``alpha=`` (fem_anim passes them by position)
+    ``create_mesh``: shared-facet ghosts         no ghosts by default (a ``partitioner`` of
+                                                ``GhostMode.shared_facet`` for ``dS``)
     ==========================================  ==================================================
 
 Each function below branches on :data:`LEGACY` (0.5) against the current API (0.9). A newer
@@ -243,8 +245,16 @@ def dofs_of_cells(V: fem.FunctionSpace, cells: np.ndarray) -> np.ndarray:
     return np.unique(cell_dofs(V)[np.asarray(cells, dtype=np.int64)]).astype(np.int32)
 
 
-def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: str):
+def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: str,
+                interior_facets: bool = False):
     """Distribute a P1 simplex mesh given on one rank (collective).
+
+    DOLFINx 0.5's ``create_mesh`` ghosts the cells across the ranks' shared facets
+    (``GhostMode.shared_facet``) by default; 0.9's default partitioner ghosts none. Without
+    ghosts an interior facet on a rank boundary has one cell on each rank and no rank
+    integrates it (0.9 then assembles ``dS`` integrals that differ from serial, and a
+    two-rank shell run was seen to hang), so a mesh with interior-facet integrals asks for
+    the shared-facet ghosts on 0.9 too. Other meshes keep each release's default.
 
     Args:
         comm: The communicator to distribute over.
@@ -252,6 +262,8 @@ def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: st
         x: The vertex coordinates (other ranks pass an empty array).
         gdim: The geometric dimension.
         cell_name: ``"triangle"`` or ``"tetrahedron"``.
+        interior_facets: The forms on the mesh integrate over interior facets (``dS``, a
+            shell's hinges): ghost the cells across shared facets on every release.
 
     Returns:
         The distributed DOLFINx mesh.
@@ -259,9 +271,12 @@ def create_mesh(comm, cells: np.ndarray, x: np.ndarray, gdim: int, cell_name: st
     if LEGACY:
         domain = ufl.Mesh(ufl.VectorElement(
             "Lagrange", ufl.Cell(cell_name, geometric_dimension=gdim), 1))
-    else:
-        domain = ufl.Mesh(basix.ufl.element("Lagrange", cell_name, 1, shape=(gdim,)))
-    return dmesh.create_mesh(comm, cells, x, domain)
+        return dmesh.create_mesh(comm, cells, x, domain)  # shared_facet ghosts by default
+    domain = ufl.Mesh(basix.ufl.element("Lagrange", cell_name, 1, shape=(gdim,)))
+    partitioner = None
+    if interior_facets and comm.size > 1:
+        partitioner = dmesh.create_cell_partitioner(dmesh.GhostMode.shared_facet)
+    return dmesh.create_mesh(comm, cells, x, domain, partitioner=partitioner)
 
 
 def colliding_cells(mesh, points: np.ndarray):

@@ -10,6 +10,8 @@ time by PETSc events as the mesh grows (:mod:`~fem_anim.bench.worker`,
 (:mod:`~fem_anim.bench.pbat_worker`); :mod:`~fem_anim.bench.extremes` runs the hard scenes of
 :mod:`~fem_anim.bench.extreme_cases` against their expected outcomes;
 :mod:`~fem_anim.bench.contact_cost` measures what contact costs per step;
+:mod:`~fem_anim.bench.contact_set` runs the classic contact scenes beside the plain
+ipctk + scipy IPC step of :mod:`~fem_anim.bench.ipc_baseline`;
 :mod:`~fem_anim.bench.mixed_verification` verifies the mixed formulation quasi-statically.
 Nothing is exported here: each bench is imported by its own module.
 """

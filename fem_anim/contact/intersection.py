@@ -16,30 +16,83 @@ count as zero. It takes any triangle soup, so a sheet and a solid's boundary tri
 (:func:`boundary_triangles`) are checked together by stacking them. Exactly coplanar pairs
 (both ends of every edge on the other's plane) are not reported: the check is for crossings,
 which contact keeps the shell's thickness away from.
+
+Quadratic tetrahedra (10 nodes, VTK's ``tetra10`` order: the 4 vertices, then the nodes on
+the edges 01, 12, 02, 03, 13, 23) are checked on their boundary triangles split in four at
+the edge nodes (the contact surface of :mod:`fem_anim.contact.p2_surface`, built here from
+the node order alone); :func:`tetra10_cells` puts DOLFINx's P2 cell dofs in that order by
+their coordinates (the node nearest each vertex and each edge midpoint), so no part of the
+check shares the contact code's reading of the dof layout.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["boundary_triangles", "crossed_frames", "crossing_pairs", "surface_collision_mesh"]
+__all__ = ["boundary_triangles", "crossed_frames", "crossing_pairs", "surface_collision_mesh",
+           "tetra10_cells"]
 
 #: Rows of the triangles compared at once in :func:`crossing_pairs` (bounds the memory).
 CHUNK = 256
+
+#: The vertices of a tetrahedron's faces, and (tetra10) each face's edge nodes: the node on
+#: edge (i, j) of VTK's order, for the face's edges (v0 v1), (v1 v2), (v2 v0).
+_FACES = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
+_EDGE_NODE = {(0, 1): 4, (1, 2): 5, (0, 2): 6, (0, 3): 7, (1, 3): 8, (2, 3): 9}
+_FACE_EDGES = np.array([[_EDGE_NODE[tuple(sorted((f[i], f[(i + 1) % 3])))] for i in range(3)]
+                        for f in _FACES])
 
 
 def boundary_triangles(cells: np.ndarray) -> np.ndarray:
     """Triangles of a tetrahedral mesh that belong to one tetrahedron only.
 
     Args:
-        cells: The tetrahedra, (cells, 4) vertex indices.
+        cells: The tetrahedra, (cells, 4) vertex indices, or (cells, 10) node indices of
+            quadratic ones (``tetra10`` order, module docstring).
 
     Returns:
-        The boundary triangles, (triangles, 3) int32 vertex indices, each row sorted.
+        The boundary triangles, (triangles, 3) int32 vertex indices: for 4-node cells each
+        row sorted; for 10-node cells each boundary face split into four at its edge nodes.
     """
-    faces = np.sort(cells[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3), axis=1)
-    unique, counts = np.unique(faces, axis=0, return_counts=True)
-    return unique[counts == 1].astype(np.int32)
+    corners = cells[:, _FACES].reshape(-1, 3)
+    faces = np.sort(corners, axis=1)
+    unique, index, counts = np.unique(faces, axis=0, return_index=True, return_counts=True)
+    if cells.shape[1] == 4:
+        return unique[counts == 1].astype(np.int32)
+    once = index[counts == 1]  # rows of the boundary faces among cells x 4 faces
+    a, b, c = corners[once].T
+    ab, bc, ca = cells[:, _FACE_EDGES].reshape(-1, 3)[once].T
+    split = np.stack([np.stack(t, 1) for t in
+                      ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))], 1)
+    return split.reshape(-1, 3).astype(np.int32)
+
+
+def tetra10_cells(corners: np.ndarray, nodes: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Quadratic cells in ``tetra10`` order, by the coordinates of their nodes.
+
+    Args:
+        corners: The cells' vertex coordinates, (cells, 4, 3), in the order wanted.
+        nodes: The cells' 10 node indices in any order, (cells, 10).
+        points: The nodes' coordinates, (nodes, 3).
+
+    Returns:
+        (cells, 10) node indices: the node at each vertex, then at the midpoint of the
+        edges 01, 12, 02, 03, 13, 23.
+
+    Raises:
+        ValueError: if a cell's nodes are not its vertices and edge midpoints.
+    """
+    pairs = sorted(_EDGE_NODE, key=_EDGE_NODE.get)
+    mids = np.stack([(corners[:, i] + corners[:, j]) / 2 for i, j in pairs], 1)
+    targets = np.concatenate([corners, mids], axis=1)  # (cells, 10, 3)
+    x = points[nodes]  # (cells, 10, 3)
+    dist = np.linalg.norm(targets[:, :, None, :] - x[:, None, :, :], axis=3)
+    pick = dist.argmin(axis=2)
+    size = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+    if np.any(np.sort(pick, axis=1) != np.arange(10)) or \
+            np.any(dist.min(axis=2) > 1e-8 * size[:, None]):
+        raise ValueError("the nodes are not the cells' vertices and edge midpoints")
+    return np.take_along_axis(nodes, pick, axis=1)
 
 
 def _segment_crosses(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray,
@@ -109,7 +162,8 @@ def crossed_frames(points: np.ndarray, cells: np.ndarray, frames) -> list[int]:
 
     Args:
         points: The rest positions of the vertices, (vertices, 3).
-        cells: The tetrahedra, (cells, 4) vertex indices, or a shell's triangles, (cells, 3).
+        cells: The tetrahedra, (cells, 4) vertex indices (or (cells, 10), quadratic), or a
+            shell's triangles, (cells, 3).
         frames: An iterable of displacements, each (vertices, 3), in vertex order.
 
     Returns:
@@ -131,7 +185,7 @@ def surface_collision_mesh(points: np.ndarray, cells: np.ndarray):
 
     Args:
         points: The rest positions of the vertices, (vertices, 3).
-        cells: The tetrahedra, (cells, 4) vertex indices.
+        cells: The tetrahedra, (cells, 4) vertex indices (or (cells, 10), quadratic).
 
     Returns:
         The collision mesh (its vertices the surface vertices, at rest) and ``used``, the

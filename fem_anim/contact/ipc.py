@@ -17,14 +17,16 @@ intersection. A shell's surface is its triangles, kept its thickness apart
 (:mod:`fem_anim.contact.contact_surface`: the ``offset`` d_min).
 
 ipctk is serial: this module is its MPI wrapper, with the distribution in
-:mod:`fem_anim.contact.distribution`. The surface vertices (P1 dofs on the exterior facets)
-are numbered by their global dof block. No rank gathers the surface: each rank builds the
-collision set of a local mesh (its own facets and a halo of nearby remote facets, rebuilt
-under MPI when a vertex has moved past the halo's margin), evaluates the pairs whose lowest
-vertex it owns, sends gradient rows and Hessian rows of remote vertices to their owners, and the
-energy, the minimum distance, the pair count and the CCD step bound are reduced over all
-ranks (the adaptive stiffness from reduced dot products), so every rank holds the same
-scalars. On one rank this is the serial computation to the last digit. The Hessian is
+:mod:`fem_anim.contact.distribution`. The surface vertices (P1 dofs on the exterior facets;
+for P2 also the facets' edge-midpoint dofs, each facet split in four on them:
+:mod:`fem_anim.contact.p2_surface`) are numbered by their global dof block. No rank
+gathers the surface: each rank builds the collision set of a local mesh (its own facets
+and a halo of nearby remote facets, rebuilt under MPI when a vertex has moved past the
+halo's margin), evaluates the pairs whose lowest vertex it owns, sends gradient rows and
+Hessian rows of remote vertices to their owners, and the energy, the minimum distance,
+the pair count and the CCD step bound are reduced over all ranks (the adaptive stiffness
+from reduced dot products), so every rank holds the same scalars. On one rank this is
+the serial computation to the last digit. The Hessian is
 projected to PSD per pair (IPC's projection) and dropped on pinned dofs (they are
 Dirichlet rows). Its pattern couples dofs the elastic sparsity does not: the matrix
 accepts new nonzeros (``NEW_NONZERO_ALLOCATION_ERR`` off), which PETSc keeps from then
@@ -53,9 +55,9 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem_anim import compat
 from fem_anim.contact.contact_surface import surface_entities
 from fem_anim.contact.distribution import SurfacePartition, owned_collisions, surface_labels
+from fem_anim.contact.p2_surface import surface_faces
 from fem_anim.errors import SceneError
 
 __all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "HALO_MARGIN",
@@ -90,20 +92,25 @@ class IPCContact:
 
     Args:
         cfg: The validated ``[contact]`` table.
-        u: The displacement Function (P1).
+        u: The displacement Function (P1 or P2).
         pinned: Local dof indices (unblocked) held by Dirichlet conditions.
         body_names: Names of the bodies by marker - 1 (for messages).
         cell_body: Body index of each local cell.
         offset: The minimum distance d_min the barrier keeps (m): 0 for solids, a shell's
             thickness (:mod:`fem_anim.contact.contact_surface`); B acts on d^2 - d_min^2
             with activation d_min + d_hat, and the CCD stops at d_min.
+        unknown: For a mixed (u, p) unknown, ``(W, u_dofs)``: its space and the map from
+            each local dof of ``V`` (unrolled) to the local dof of ``W`` holding it; the
+            barrier's gradient and Hessian then go to those rows of the unknown (the
+            displacement block only: the barrier does not depend on the pressure). None:
+            the unknown is ``u``.
 
     Raises:
         SceneError: (collectively) if two bodies cross or are within ``dhat`` at rest.
     """
 
     def __init__(self, cfg: dict, u, pinned: np.ndarray, body_names: list[str],
-                 cell_body: np.ndarray, offset: float = 0.0):
+                 cell_body: np.ndarray, offset: float = 0.0, unknown=None):
         V = u.function_space
         mesh = V.mesh
         self.comm: MPI.Comm = mesh.comm
@@ -118,15 +125,13 @@ class IPCContact:
         mesh.topology.create_connectivity(tdim - 1, tdim)
         mesh.topology.create_connectivity(tdim - 1, 0)
         mesh.topology.create_connectivity(tdim, 0)
-        vertex_dof = np.empty(mesh.topology.index_map(0).size_local
-                              + mesh.topology.index_map(0).num_ghosts, dtype=np.int64)
         c_to_v = mesh.topology.connectivity(tdim, 0).array.reshape(-1, tdim + 1)
-        vertex_dof[c_to_v.ravel()] = compat.cell_dofs(V)[:, : tdim + 1].ravel()
-        entity_vertices, entity_cells = surface_entities(mesh)  # a shell: its triangles
-        local_faces = vertex_dof[entity_vertices]
+        # the surface (a solid's boundary facets, a shell's triangles), P2 split on midpoints
+        entity_vertices, entity_cells = surface_entities(mesh)
+        local_faces, parent = surface_faces(V, entity_vertices, c_to_v)
         faces = index_map.local_to_global(local_faces.ravel().astype(np.int32)).reshape(
-            -1, g).astype(np.int64)
-        face_body = cell_body[entity_cells].astype(np.int64)
+            local_faces.shape).astype(np.int64)
+        face_body = cell_body[entity_cells[parent]].astype(np.int64)
         X = V.tabulate_dof_coordinates()[:, :g]
         is_pinned = np.zeros(V.dofmap.index_map_bs * (n_owned + index_map.num_ghosts), bool)
         is_pinned[pinned] = True
@@ -134,6 +139,8 @@ class IPCContact:
         labels = surface_labels(self.comm, faces) if not cfg["self"] else \
             np.zeros_like(faces)
         start, end = index_map.local_range
+        #: each owned block's local and global rows in the unknown, (owned blocks, gdim)
+        self.unknown_rows, self.unknown_global = self._unknown_rows(unknown, n_owned, start)
         self.part = SurfacePartition(self.comm, faces, X[local_faces], free, face_body,
                                      labels.astype(np.int64), X[:n_owned], start, end,
                                      bool(cfg["self"]))
@@ -166,6 +173,21 @@ class IPCContact:
         if error:
             raise SceneError(error)
 
+    def _unknown_rows(self, unknown, n_owned: int, start: int) -> tuple[np.ndarray,
+                                                                         np.ndarray]:
+        """The local and global rows of the unknown holding each owned dof block of ``V``
+        (vertex-major: x, y(, z) of each block)."""
+        g = self.gdim
+        rows = np.arange(n_owned, dtype=np.int64)[:, None] * g + np.arange(g)
+        if unknown is None:
+            return rows, rows + start * g
+        W, u_dofs = unknown
+        rows = np.asarray(u_dofs)[rows.ravel()].astype(np.int64)
+        bs, index_map = W.dofmap.index_map_bs, W.dofmap.index_map
+        assert np.all(rows < index_map.size_local * bs)  # owned dofs of V are owned in W
+        nodes = index_map.local_to_global((rows // bs).astype(np.int32))
+        return rows.reshape(-1, g), (np.asarray(nodes, np.int64) * bs + rows % bs).reshape(-1, g)
+
     # -- the MPI seam (fem_anim.contact.distribution) ---------------------------------------
     def _u_owned(self) -> np.ndarray:
         return self.u.x.array.reshape(-1, self.gdim)[: self.n_owned]
@@ -181,6 +203,8 @@ class IPCContact:
             reach = lambda L: self.offset + self.dhat + (3.0 + 8.0 * HALO_MARGIN) * L  # noqa: E731
         halo = self.part.build(self._u_owned(), reach)
         halo.margin = HALO_MARGIN * halo.longest
+        #: the unknown's global row of each local vertex's components (from their owners)
+        halo.unknown_global = halo.exchange.fetch(self.unknown_global)
         self.halo_builds += 1
         self.timers["exchange_s"] += time.perf_counter() - start
         return halo
@@ -223,12 +247,14 @@ class IPCContact:
         return self._friction_halo.positions(self._u_owned())
 
     def _to_global(self, halo, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
-        """Triplets of a local mesh's dofs, free rows and columns only, as global dofs."""
+        """Triplets of a local mesh's dofs, free rows and columns only, as the unknown's
+        global rows, with the rank owning each row."""
         g = self.gdim
         keep = halo.free[rows] & halo.free[cols]
         rows, cols, vals = rows[keep], cols[keep], vals[keep]
-        return (halo.vertices[rows // g] * g + rows % g,
-                halo.vertices[cols // g] * g + cols % g, vals)
+        owner = np.searchsorted(self.part.ranges, halo.vertices[rows // g], side="right")
+        to_global = halo.unknown_global.ravel()
+        return to_global[rows], to_global[cols], vals, owner
 
     # -- energy, gradient, Hessian -------------------------------------------------------------
     def energy(self, friction: bool = True) -> float:
@@ -278,8 +304,7 @@ class IPCContact:
         x = self._update()
         start = time.perf_counter()
         rows = self._gradient_rows(x, scale, True)
-        values = b.array.reshape(-1, self.gdim)
-        values[self.part.blocks] += rows[self.part.blocks]
+        b.array[self.unknown_rows[self.part.blocks].ravel()] += rows[self.part.blocks].ravel()
         self.timers["barrier_s"] += time.perf_counter() - start
 
     def add_hessian(self, A: PETSc.Mat, scale: float) -> None:
@@ -309,8 +334,7 @@ class IPCContact:
                                                 scale * Hf.data))
         H = H.tocoo()
         triplets.insert(0, self._to_global(self.halo, H.row, H.col, scale * H.data))
-        rows, cols, vals = (np.concatenate(t) for t in zip(*triplets))
-        owner = np.searchsorted(self.part.ranges, rows // self.gdim, side="right")
+        rows, cols, vals, owner = (np.concatenate(t) for t in zip(*triplets))
         parts = [(rows[owner == r], cols[owner == r], vals[owner == r])
                  for r in range(self.comm.size)]
         got = self.comm.alltoall(parts)
@@ -458,7 +482,9 @@ class IPCContact:
         self.kappa = self.kappa_ipc / weight
 
     def _min_distance(self, x: np.ndarray) -> float:
-        """The smallest distance of the pairs nearer than d_hat (inf if none; collective)."""
+        """The smallest SQUARED distance of the pairs nearer than d_hat (m^2, inf if none;
+        collective): ipctk's ``compute_minimum_distance``, the quantity its stiffness update
+        takes."""
         local = float(self.collisions.compute_minimum_distance(self.halo.mesh, x)) \
             if len(self.collisions) else np.inf
         return self.comm.allreduce(local, op=MPI.MIN)
@@ -491,8 +517,9 @@ class IPCContact:
             was lagged (IPC's normal force and tangent basis taken at x_n: 1 with friction).
         """
         x = self._update()
+        d = np.sqrt(self._min_distance(x))  # ipctk's is d^2
         return {"barrier_stiffness": self.kappa, "dhat": self.dhat,
-                "contact_pairs": self.num_pairs, "min_distance": self._min_distance(x),
+                "contact_pairs": self.num_pairs, "min_distance": float(d),
                 "friction_lags": int(self.friction is not None)}
 
     def finish_step(self) -> None:

@@ -119,13 +119,8 @@ def build_shell_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
         The distributed surface mesh (gdim 3, tdim 2); rank 0 keeps the input arrays.
 
     Raises:
-        MeshError: on every rank if the surface cannot be made or fails the checks, or on
-            DOLFINx other than 0.5 (shells are verified on DOLFINx 0.5.2 only: on 0.9.0 a
-            two-rank shell run was seen to hang).
+        MeshError: on every rank if the surface cannot be made or fails the checks.
     """
-    if not compat.LEGACY:
-        raise MeshError(f"shell bodies ([shell]) run on DOLFINx 0.5 only for now, not on "
-                        f"{'.'.join(map(str, compat.DOLFINX_VERSION))} (not yet verified there)")
     points, cells = np.empty((0, 3)), np.empty((0, 3), np.int64)
     error = None
     if comm.rank == 0:
@@ -137,7 +132,7 @@ def build_shell_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
     error = comm.bcast(error, root=0)
     if error:
         raise MeshError(error)
-    mesh = compat.create_mesh(comm, cells, points, 3, "triangle")
+    mesh = compat.create_mesh(comm, cells, points, 3, "triangle", interior_facets=True)
     input_index = np.asarray(mesh.geometry.input_global_indices, dtype=np.int64)
     return SimplexMesh(mesh, points, cells, np.ones(len(cells), np.int32), input_index,
                        {"body": 1})

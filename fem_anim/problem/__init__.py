@@ -7,7 +7,8 @@ and obstacle contact into one energy whose gradient and Hessian are taken by
 (``matrices``), the reported energies (``reported_energies``), the form compiler
 (``form_compiler``) and the assembly's log events (``events``); beside it the per-point quadrature
 data (``quadrature``), the terms assembled once (``constant_terms``), the mixed (u, p)
-unknown (``mixed_space``) and a shell's membrane and bending energies (``shell_terms``).
+unknown (``mixed_space``), a shell's membrane and bending energies (``shell_terms``) and its
+wind drag (``wind_terms``).
 """
 
 from fem_anim.lazy_exports import lazy_exports
@@ -26,5 +27,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "QuadratureData": "quadrature",
     "ShellEnergy": "shell_terms",
     "shell_measures": "shell_terms",
+    "WindDrag": "wind_terms",
     "FILTERED_MODES": "tangent_filter",
 })

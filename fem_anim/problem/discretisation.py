@@ -31,6 +31,7 @@ from fem_anim.forms.time_schemes import SCHEMES
 from fem_anim.mesh.bodies import body_regions
 from fem_anim.problem.mixed_space import MixedFields
 from fem_anim.problem.shell_terms import ShellEnergy, shell_measures, shell_thickness
+from fem_anim.problem.wind_terms import WindDrag
 
 __all__ = ["Discretisation", "default_quadrature_degree"]
 
@@ -108,7 +109,8 @@ class Discretisation:
         self.elastic_terms = [] if self.mixed else [(self.material, self.dx_elastic)]
         self.W0 = compat.cell_space(mesh)  # per-cell data: region parameters, energy density
         self.bodies = scene.get("body") or []
-        if scene.get("region") or self.bodies:
+        # a mixed scene's bodies share one material (fem_anim.scene.consistency): constants
+        if (scene.get("region") or self.bodies) and not self.mixed:
             self._regions(body_regions(scene) if self.bodies else None)
         self.dx_mass = inertia_forms.mass_measure(dx, scene["element"]["degree"],
                                                   scene["material"]["mass"] == "lumped")
@@ -126,3 +128,5 @@ class Discretisation:
             _, self.dS_shell = shell_measures(mesh)
             self.dx_shell = self.dx_mass
             self.elastic_terms = []
+        #: ``[wind]``: a shell's aerodynamic drag (fem_anim.problem.wind_terms)
+        self.wind = WindDrag.from_scene(scene, mesh) if "wind" in scene.data else None

@@ -123,6 +123,10 @@ class EnergyTerms:
             if self.contact.friction is not None:
                 potential += self._of_unknown(self.contact.friction)
                 varying += self.contact.friction
+        if self.wind is not None:  # drag: a dissipation with the geometry of u_n, in w E
+            drag = self.wind.step_potential(self.u, self.u_anchor, self.u_prev,
+                                            self.damping_coefficient, self.weight, self.dx_shell)
+            potential, varying = potential + drag, varying + drag
         terms = StepTerms(elastic_u, gravity_u, potential_u, potential, varying, contact_terms)
         terms.convex = inertia_forms.inertia(u_obj, self.u_pred, self.rho, self.dx_mass)
         return terms
@@ -149,6 +153,9 @@ class EnergyTerms:
             zero = ufl.as_vector([0.0] * d)
             ufl_forms["damping_force"] = ufl.derivative(
                 self._dissipation(self.v, zero, 1.0), self.v, dv_V)
+        if self.wind is not None:  # f(v) at (u, v), for the initial acceleration
+            ufl_forms["drag_force"] = ufl.derivative(
+                self.wind.force_potential(self.v, self.u, self.dx_shell), self.v, dv_V)
         objective = terms.objective = step_objective(terms.convex, terms.potential,
                                                      self.weight)
         #: the inertia, damping and gravity terms as matrices and a vector assembled once
@@ -274,15 +281,33 @@ class EnergyTerms:
         points, _ = compat.reference_quadrature(cell, self.quadrature_degree)
         return points
 
-    def _quadrature_data(self, name: str, expression, evaluate, in_shape, out_shape
-                         ) -> QuadratureData:
-        """A quadrature Function filled by ``evaluate(expression)`` on every update."""
+    def _quadrature_data(self, name: str, expression, evaluate, in_shape, out_shape,
+                         cells: np.ndarray | None = None) -> QuadratureData:
+        """A quadrature Function filled by ``evaluate(expression)`` on every update (on
+        ``cells`` only, if given)."""
         Q = compat.quadrature_space(self.domain.mesh, self.quadrature_degree, out_shape)
         index_map = self.domain.mesh.topology.index_map(self.d)
         return QuadratureData(fem.Function(Q, name=name),
                               compat.expression(expression, self._quadrature_points(),
                                                 JIT_OPTIONS),
-                              evaluate, index_map.size_local + index_map.num_ghosts, in_shape)
+                              evaluate, index_map.size_local + index_map.num_ghosts, in_shape,
+                              cells)
+
+    def _cells_reading(self, key: str) -> np.ndarray | None:
+        """The local cells whose material's psi reads the extra data ``key``
+        (:data:`~fem_anim.forms.material.EXTRA_DATA`), None for every cell.
+
+        With several material models each is integrated over its own tagged cells
+        (``elastic_terms``), so the data of a corotated body's SVD is read there alone; on a
+        pile of four bodies, one of them corotated, the others' cells need none.
+        """
+        cells = self.material_map
+        index_map = self.domain.mesh.topology.index_map(self.d)
+        if cells is None or len(cells.models) == 1 or \
+                cells.cell_model.size != index_map.size_local + index_map.num_ghosts:
+            return None
+        reads = np.array([key in get_material(m).needs(self.d) for m in cells.models])
+        return None if reads.all() else np.flatnonzero(reads[cells.cell_model]).astype(np.int32)
 
     def _psi(self, u, F=None, material=None):
         """A material's psi of F(u) (or of a given F), with its quadrature data."""
@@ -294,7 +319,8 @@ class EnergyTerms:
             for key in needs:
                 data = EXTRA_DATA[key]
                 q = self._quadrature_data(key, deformation_gradient(u), data.evaluate,
-                                          (self.d, self.d), data.value_shape(self.d))
+                                          (self.d, self.d), data.value_shape(self.d),
+                                          self._cells_reading(key))
                 self.quadrature_data.append(q)
                 self._extra[u][data.keyword] = q.function
         extra = {data.keyword: self._extra[u][data.keyword]

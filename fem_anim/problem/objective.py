@@ -102,6 +102,8 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         self.mass_form = compiled["mass"]
         self.potential_gradient_form = compiled["potential_gradient"]
         self.damping_force_form = compiled.get("damping_force")
+        #: -f(v) of ``[wind]``'s drag at (u, v) (None without wind)
+        self.drag_force_form = compiled.get("drag_force")
         self.energy_forms = {k: compiled[k] for k in ("kinetic", "elastic", "gravity",
                                                       "contact") if k in compiled}
         self.cell_elastic_form = compiled["cell_elastic"]
@@ -146,14 +148,16 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
             # a shell's layers stay its thickness apart (fem_anim.contact.contact_surface)
             offset = self.scene["shell"]["thickness"] if "shell" in self.scene.data else 0.0
             self.ipc = IPCContact(self.scene["contact"], self.u, pinned, names, self.cell_body,
-                                  offset)
+                                  offset,
+                                  (self.fields.W, self.fields.u_dofs) if self.mixed else None)
             self.average_mass = self.average_vertex_mass()
 
     # -- the step -------------------------------------------------------------------------
     @property
     def damped(self) -> bool:
-        """Whether g holds a Rayleigh dissipation potential (``[damping]``)."""
-        return self.damping_force_form is not None
+        """Whether g holds a dissipation potential: Rayleigh damping (``[damping]``) or a
+        shell's drag (``[wind]``); either reads the scheme's ``(c, u_d)``."""
+        return self.damping_force_form is not None or self.drag_force_form is not None
 
     def stage(self, u_n: np.ndarray, u_pred: np.ndarray, weight: float, t: float, h: float,
               damping: tuple[float, np.ndarray] | None = None) -> None:

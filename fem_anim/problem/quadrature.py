@@ -26,8 +26,10 @@ class QuadratureData:
 
     Holds a quadrature-space Function and a compiled expression (F, or the material
     tangent) at the points of the elastic quadrature rule; :meth:`update` evaluates it on
-    every local cell (owned and ghost, so no communication is needed) and applies a numpy
-    map in one vectorised call: the extra data of
+    every local cell (owned and ghost, so no communication is needed), or only on ``cells``
+    when given (the cells whose forms read the field: a multi-material mesh's corotated body;
+    the other cells' values are never read and stay 0), and applies a numpy map in one
+    vectorised call: the extra data of
     :data:`fem_anim.forms.material.EXTRA_DATA`, or the PSD projection of
     :func:`fem_anim.solver.hessian_modification.project_psd`.
     """
@@ -37,14 +39,18 @@ class QuadratureData:
     evaluate: object
     num_cells: int
     value_shape: tuple[int, ...]
+    #: Local cells to evaluate on (None: all ``num_cells``).
+    cells: np.ndarray | None = None
 
     def update(self) -> None:
-        """Evaluate the expression on every local cell and store its numpy map."""
-        cells = np.arange(self.num_cells, dtype=np.int32)
+        """Evaluate the expression on its cells and store its numpy map there."""
+        cells = np.arange(self.num_cells, dtype=np.int32) if self.cells is None else self.cells
+        if cells.size == 0:  # no cell of this rank reads the field
+            return
         mesh = self.function.function_space.mesh
         values = compat.evaluate(self.expression, mesh, cells).reshape(-1, *self.value_shape)
-        values = self.evaluate(values).reshape(self.num_cells, -1)
-        dofs = compat.cell_dofs(self.function.function_space)[: self.num_cells]
+        values = self.evaluate(values).reshape(cells.size, -1)
+        dofs = compat.cell_dofs(self.function.function_space)[cells]
         bs = self.function.function_space.dofmap.bs
         target = self.function.x.array.reshape(-1, bs)
         target[dofs.ravel()] = values.reshape(-1, bs)

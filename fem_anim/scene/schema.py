@@ -225,6 +225,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
                        doc="hinge stiffness k, 0 for a membrane, or \"derived\": from E, nu "
                        "and the thickness (k = D / 6, D = E t^3 / (12 (1 - nu^2)))"),
     },
+    "wind": {  # aerodynamic drag on a shell (fem_anim/forms/aerodynamic_drag.py)
+        "velocity": Key(list, [0.0, 0.0, 0.0], None, (3,), unit="m/s",
+                        doc="the wind's velocity w (zero: still air, drag only)"),
+        "drag_coefficient": Key(NUM, 1.2, c.non_negative, doc="C_d of the normal pressure "
+                                "drag f = -C_d rho_a |s| s n / 2 per area, s = (v - w) . n"),
+        "air_density": Key(NUM, 1.2, c.positive, unit="kg/m^3", doc="rho_a of the drag law"),
+    },
     "contact": {  # contact between bodies and of a body with itself (fem_anim/contact/ipc.py)
         "self": Key(bool, True, doc="each body also repels itself"),
         "dhat": Key(NUM, 1.0e-3, c.positive, unit="m", doc="barrier activation distance"),
@@ -338,6 +345,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
              "[body.initial], [[body.pin]] and [[body.region]] (keys as at the top level)"),
     "shell": ("[shell]", "a thin shell: the body is a triangle surface in 3D (mesh.shape = "
               "\"sheet\" or a surface file), its membrane and bending energies"),
+    "wind": ("[wind]", "wind and aerodynamic drag on a [shell] (absent: none)"),
     "contact": ("[contact]", "IPC contact between surfaces (on by default with several "
                 "bodies)"),
     "solver": ("[solver]", "the minimiser of each step and its linear solver"),
@@ -345,7 +353,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "render": ("[render]", "the pictures and animations"),
 }
 #: Sections that exist only when a scene declares them (physical terms).
-OPTIONAL_SECTIONS = ("gravity", "damping", "initial", "contact", "shell")
+OPTIONAL_SECTIONS = ("gravity", "damping", "initial", "contact", "shell", "wind")
 #: Sections that are arrays of tables (``[[pin]]``, ``[[region]]``, ``[[obstacle]]``).
 ARRAY_SECTIONS = ("pin", "region", "obstacle")
 #: Sub-tables of a ``[[body]]``: the top-level sections that describe one body.

@@ -92,6 +92,9 @@ def check_shell(data: dict[str, Any]) -> None:
         SceneError: for the first rule broken, naming the keys and their values.
     """
     if "shell" not in data:
+        if "wind" in data:
+            raise SceneError("[wind] acts on a shell's surface: add a [shell] table (a "
+                             "solid body has no wind drag)")
         if data["mesh"]["shape"] == "sheet":
             raise SceneError("mesh.shape = \"sheet\" is a surface: add a [shell] table with its "
                              "thickness to make the body a shell")

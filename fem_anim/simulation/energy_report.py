@@ -109,7 +109,8 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
     friction = any(ob["friction"] > 0 for ob in scene["obstacle"]) or \
         ("contact" in scene.data and scene["contact"]["friction"] > 0)
     moving = moving_pins(scene)
-    conservative = not scene.damped and not friction and not moving
+    conservative = not scene.damped and not friction and not moving and \
+        "wind" not in scene.data  # a shell's drag dissipates
     e_end = rows[-1]["total_energy"] if rows else e0
     drift = excursion = None
     if exchanged > initial.get("roundoff", 0.0):
@@ -118,8 +119,10 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
     rise = max([0.0] + [r["total_energy"] - e0 for r in rows]) / exchanged \
         if drift is not None else None
     damped = conservative and drift is not None and drift < -DAMPED_THRESHOLD
-    # damping and friction only take energy away: a gain is flagged for them too
-    gained = not moving and drift is not None and drift > DAMPED_THRESHOLD
+    # damping and friction only take energy away: a gain is flagged for them too (not for a
+    # blowing [wind], which works on the body)
+    blowing = "wind" in scene.data and any(scene["wind"]["velocity"])
+    gained = not moving and drift is not None and drift > DAMPED_THRESHOLD and not blowing
     return {"initial_energy": e0, "final_energy": e_end, "exchanged_energy": exchanged,
             "drift": drift, "max_excursion": excursion, "max_rise": rise,
             "moving_pins": moving, "stored_energy": _stored(rows[-1] if rows else initial),
@@ -167,8 +170,8 @@ def describe_energy(report: dict, scene) -> str:
     if not report["conservative"] and not report["gained"]:
         rise = report.get("max_rise") or 0.0
         return (f"energy drift {pct:+.3g} % of the exchanged energy "
-                f"({report['exchanged_energy']:.4g} J): taken by damping, friction and "
-                f"{integrator}'s step, as designed; at most {100.0 * rise:.3g} % above its "
+                f"({report['exchanged_energy']:.4g} J): taken by damping, friction, drag and "
+                f"{integrator}'s step (given by a wind), as designed; at most {100.0 * rise:.3g} % above its "
                 f"start{unmet}")
     base = (f"energy drift {pct:+.3g} % of the exchanged energy "
             f"({report['exchanged_energy']:.4g} J), max excursion "

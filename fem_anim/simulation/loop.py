@@ -158,7 +158,7 @@ class Simulation:
         """a = M^-1 (f(u) - C v) (m/s^2), zero on pinned dofs (collective).
 
         f = -grad E(u) (elastic and gravity forces), C the Rayleigh damping matrix if
-        declared; u (m) and v (m/s) are local dof values of V, ghosts included.
+        declared, f_d a shell's wind drag at (u, v) if declared; u (m) and v (m/s) are local dof values of V, ghosts included.
         """
         p = self.problem
         v = np.zeros_like(u) if v is None else v
@@ -167,9 +167,11 @@ class Simulation:
         f = fem_petsc.assemble_vector(p.potential_gradient_form)
         f.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         f.scale(-1.0)
-        if p.damping_force_form is not None:  # M a_0 = f_0 - C v_0
+        for form in (p.damping_force_form, p.drag_force_form):  # M a_0 = f_0 - C v_0 + f_d
+            if form is None:
+                continue
             p.v.x.array[:] = v
-            fem_petsc.assemble_vector(f_damp := f.duplicate(), p.damping_force_form)
+            fem_petsc.assemble_vector(f_damp := f.duplicate(), form)
             f_damp.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
             f.axpy(-1.0, f_damp)
             f_damp.destroy()

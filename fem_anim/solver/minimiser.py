@@ -28,11 +28,16 @@ the residual norms only, and the reported Newton decrement is NaN (r^T H^-1 r of
 indefinite H bounds nothing).
 
 With IPC's step test (``stopping = "step"``) and ``[contact]``, the Hessian's barrier and
-friction part is IPC's per-pair PSD projection until a Newton step is below the test's
-size, then exact (:meth:`fem_anim.contact.ipc.IPCContact.exact_hessian`): the projected
-Hessian differs from the true one at a resting contact and converges linearly there. If a
-direction from the exact Hessian fails (no descent), the step continues from its last
-iterate with the projection.
+friction part is IPC's per-pair PSD projection until a full Newton step is below
+:data:`EXACT_NEAR` times the test's size, then exact
+(:meth:`fem_anim.contact.ipc.IPCContact.exact_hessian`): the projected Hessian differs from
+the true one near a contact and converges linearly there (seed section 3.2.2: Newton's
+quadratic convergence needs the true Hessian). If a direction from the exact Hessian fails
+(no descent: its model is poor that far out), the step continues from its last iterate with
+the projection and tries the exact Hessian again once the steps are :data:`EXACT_SHRINK`
+times smaller, down to the test's size itself; a failure there keeps the projection for the
+rest of the step (docs/contact.md, "Where a pile's Newton iterations and seconds go",
+measures the factors).
 """
 
 from __future__ import annotations
@@ -52,7 +57,13 @@ from fem_anim.solver.stopping import (ROUNDOFF_REASON, StoppingTest, accept_at_b
                                       at_objective_roundoff, finish_at_roundoff, reason_name,
                                       resolve_stopping, scene_diagonal)
 
-__all__ = ["Minimiser", "NONLINEAR_METHODS"]
+__all__ = ["EXACT_NEAR", "EXACT_SHRINK", "Minimiser", "NONLINEAR_METHODS"]
+
+#: With IPC's step test: the barrier's exact Hessian once a full Newton step is below this
+#: many times the test's size.
+EXACT_NEAR = 100.0
+#: ... and, after an exact direction failed, once the steps are this many times smaller.
+EXACT_SHRINK = 10.0
 
 #: Scene ``solver.method`` -> PETSc options (lowest layer above the library defaults).
 NONLINEAR_METHODS: dict[str, dict[str, str]] = {
@@ -223,6 +234,8 @@ class Minimiser:
         self.stop.start()
         self.stop.step_scale = self.step_tol * getattr(self.problem, "step_size", 0.0)
         self._exact_ok = self._exact_near
+        self._near = EXACT_NEAR  # x the test's size: where the exact Hessian takes over
+        self._exact_on = False
         if self._exact_near:
             self.problem.ipc.exact_hessian(False)
         self._own_linear_its = 0
@@ -239,7 +252,11 @@ class Minimiser:
             if reason < 0 and self._exact_near and self._exact_ok and \
                     (self.budget is None or newton_its < self.budget):
                 # the exact barrier Hessian gave no descent: on from x_k, projected
-                self._exact_ok = False
+                if self._exact_on and self._near > 1.0:
+                    self._near = max(1.0, self._near / EXACT_SHRINK)  # again, nearer
+                else:
+                    self._exact_ok = False
+                self._exact_on = False
                 self.problem.ipc.exact_hessian(False)
                 self.stop.restarting = True
                 continue
@@ -335,7 +352,8 @@ class Minimiser:
             self.reuse.check_step(snes.getSolution())
         reason = self.stop.test(it, norms[2], g, snes.getTolerances(), snes.getSolution())
         if self._exact_ok and reason == 0 and self.stop.steps and \
-                self.stop.steps[-1] <= self.stop.step_scale:
+                self.stop.steps[-1] <= self._near * self.stop.step_scale:
+            self._exact_on = True
             # near the minimiser the exact Hessian is positive definite: quadratic
             # convergence where IPC's per-pair projection converges linearly
             self.problem.ipc.exact_hessian(True)
