@@ -210,6 +210,12 @@ class IPCContact:
         return halo
 
     @property
+    def mesh(self) -> ipctk.CollisionMesh:
+        """This rank's collision mesh: its facets and the halo (one rank: the whole surface);
+        :attr:`collisions` are its pairs on it, ``_update()`` its positions."""
+        return self.halo.mesh
+
+    @property
     def num_pairs(self) -> int:
         """The number of collisions of the whole surface at the last evaluation (collective)."""
         return self.comm.allreduce(len(self.collisions))
