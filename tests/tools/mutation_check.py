@@ -1001,15 +1001,15 @@ MUTATIONS: list[Mutation] = [
               "test_p2_surface_splits_each_facet_on_its_midpoint_dofs",),
              "a P2 facet's first sub-triangle takes the wrong midpoint dof"),
     Mutation("ipc-mixed-rows-unmapped", "fem_anim/contact/ipc.py",
-             "rows = np.asarray(u_dofs)[rows].astype(np.int64)",
-             "rows = rows.astype(np.int64)",
+             "rows = np.asarray(u_dofs)[rows.ravel()].astype(np.int64)",
+             "rows = rows.ravel().astype(np.int64)",
              ("tests/test_p2_mixed_contact.py::"
               "test_barrier_taylor_on_p2_and_mixed_unknowns[mixed-0.5]",),
              "the barrier's gradient of a mixed unknown goes to V's dof numbers, not w's"),
     Mutation("ipc-mixed-hessian-on-v-rows", "fem_anim/contact/ipc.py",
-             "return rows, (np.asarray(nodes, np.int64) * bs + rows % bs).reshape(-1, g)",
-             "return rows, (self.blocks[:, None] + V.dofmap.index_map.local_range[0]) * g "
-             "+ np.arange(g)",
+             "return rows.reshape(-1, g), (np.asarray(nodes, np.int64) * bs + rows % bs)",
+             "return rows.reshape(-1, g), (np.arange(n_owned)[:, None] * g + np.arange(g) "
+             "+ start * g)",
              ("tests/test_p2_mixed_contact.py::"
               "test_barrier_taylor_on_p2_and_mixed_unknowns[mixed-0.5]",),
              "the barrier's Hessian of a mixed unknown goes to V's global rows, not w's"),
