@@ -30,6 +30,7 @@ from fem_anim import compat
 from fem_anim.errors import ConvergenceError, FemAnimError
 from fem_anim.mesh.bodies import build_scene_mesh
 from fem_anim.mesh.simplex import SimplexMesh
+from fem_anim.output.dof_gather import DofGather
 from fem_anim.output.files import CellGather, VertexGather
 from fem_anim.output.provenance import WallClock
 from fem_anim.petsc_options import flatten_options, merge_options
@@ -127,6 +128,8 @@ class Simulation:
         self.minimiser.require_read(cli_options or {})
         self.gather = VertexGather(self.domain, self.problem.V)
         self.cell_gather = CellGather(self.domain)
+        #: The fields the trajectory holds at every dof (``output.fields``), by name.
+        self.dof_gathers = self._dof_gathers()
         self.clock.add("compile", self.problem.compile_s)
         self.clock.add("setup", time.perf_counter() - start - self.clock.seconds["mesh"]
                        - self.problem.compile_s)
@@ -263,6 +266,30 @@ class Simulation:
         """Vertex displacements and cell energy densities of ``state`` on rank 0 (collective)."""
         return (self.gather.gather(state.u),
                 self.cell_gather.gather(self.problem.cell_energy_density(state.u)))
+
+    def _dof_gathers(self) -> dict[str, DofGather]:
+        """A P2 body's displacement, and the listed velocity and pressure (collective)."""
+        p, fields = self.problem, self.scene["output"]["fields"]
+        out = {}
+        if self.scene["element"]["degree"] > 1 or "velocity" in fields:
+            gather = DofGather(self.domain, p.V)
+            if self.scene["element"]["degree"] > 1:
+                out["displacement"] = gather
+            if "velocity" in fields:
+                out["velocity"] = gather
+        if "pressure" in fields:
+            out["pressure"] = DofGather(self.domain, p.fields.Q)
+        return out
+
+    def frame_dofs(self, state: State) -> dict[str, np.ndarray | None]:
+        """Every dof of the fields of :attr:`dof_gathers` on rank 0 (None elsewhere;
+        collective): displacement (m), velocity (m/s) and pressure p = mu p~ (Pa; the
+        mixed unknown's p~ = p / mu, :mod:`fem_anim.problem.mixed_space`), as the last
+        step left it."""
+        p = self.problem
+        values = {"displacement": lambda: state.u, "velocity": lambda: state.v,
+                  "pressure": lambda: float(p.mu.value) * p.p.x.array}
+        return {name: g.gather(values[name]()) for name, g in self.dof_gathers.items()}
 
     def timed_step(self, state: State, dt: float) -> tuple[State, dict]:
         """:meth:`step`, its energies and its stats row (a ``stats.csv`` row; collective).

@@ -913,6 +913,29 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_safety.py::"
               "test_a_module_ready_without_its_lock_loads_instead_of_failing",),
              "a module ready without its lock recompiles and fails on .c.cached"),
+    Mutation("dof-gather-edge-order", "fem_anim/output/dof_gather.py",
+             "edges = np.unique(every[~vertex_rows], axis=0)",
+             "edges = np.unique(every[~vertex_rows], axis=0)[::-1]",
+             ("tests/test_trajectory_fields.py::"
+              "test_p2_step_residual_recomputed_from_the_written_fields",),
+             "a P2 field's edge rows written in another order than their nodes"),
+    Mutation("frame-velocity-is-displacement", "fem_anim/simulation/loop.py",
+             '"velocity": lambda: state.v,', '"velocity": lambda: state.u,',
+             ("tests/test_trajectory_fields.py::"
+              "test_p2_step_residual_recomputed_from_the_written_fields",),
+             "the trajectory's velocity field holds the displacement"),
+    Mutation("frame-pressure-unscaled", "fem_anim/simulation/loop.py",
+             '"pressure": lambda: float(p.mu.value) * p.p.x.array}',
+             '"pressure": lambda: p.p.x.array}',
+             ("tests/test_trajectory_fields.py::"
+              "test_mixed_pressure_written_satisfies_the_step_equations",),
+             "the mixed run's pressure written as p / mu, not in Pa"),
+    Mutation("resume-drops-merged-fields", "fem_anim/output/trajectory.py",
+             "for name in self.nodes\n                                           if",
+             "for name in ()\n                                           if",
+             ("tests/test_trajectory_fields.py::"
+              "test_frames_merged_before_a_kill_keep_their_fields",),
+             "a resume after the merge loses the kept frames' dof fields"),
 ]
 
 
