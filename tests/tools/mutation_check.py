@@ -540,7 +540,7 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_export.py::test_usd_time_samples_are_the_trajectory",),
              "frame k written at time code start + k + 1"),
     Mutation("export-rest-points", "fem_anim/export/usd_stage.py",
-             "        x = run.points + u\n", "        x = run.points + 0.0 * u\n",
+             "        x = rest + u\n", "        x = rest + 0.0 * u\n",
              ("tests/test_export.py::test_usd_time_samples_are_the_trajectory",),
              "every time sample the rest shape"),
     Mutation("export-left-handed", "fem_anim/export/usd_stage.py",
@@ -936,6 +936,18 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_trajectory_fields.py::"
               "test_frames_merged_before_a_kill_keep_their_fields",),
              "a resume after the merge loses the kept frames' dof fields"),
+    Mutation("p2-export-vertices-only", "fem_anim/export/run_reader.py",
+             "if nodes is not None and np.all(nodes[:, 0] == nodes[:, 1]):",
+             "if nodes is not None:",
+             ("tests/test_export_p2.py::"
+              "test_p2_export_is_the_quadratic_field_on_the_refined_surface",),
+             "a P2 run exported through its vertex values only (flat triangles)"),
+    Mutation("p2-refine-midpoints-swapped", "fem_anim/export/boundary.py",
+             "ab, bc, ca = row(a, b), row(b, c), row(c, a)",
+             "ab, bc, ca = row(b, c), row(a, b), row(c, a)",
+             ("tests/test_export_p2.py::"
+              "test_p2_export_is_the_quadratic_field_on_the_refined_surface",),
+             "the refined triangles take the wrong edge's midside dof"),
 ]
 
 
