@@ -37,6 +37,8 @@ from fem_anim.petsc_options import flatten_options, merge_options
 from fem_anim.problem.form_compiler import JIT_OPTIONS
 from fem_anim.problem.objective import EnergyProblem
 from fem_anim.scene.consistency import MIXED_PRESETS
+from fem_anim.simulation.energy_report import moving_pins
+from fem_anim.simulation.handle_work import handle_work
 from fem_anim.simulation.initial_state import initial_velocity
 from fem_anim.simulation.integrators import Integrator, State
 from fem_anim.simulation.newton_start import initial_guess
@@ -128,6 +130,7 @@ class Simulation:
         self.minimiser.require_read(cli_options or {})
         self.gather = VertexGather(self.domain, self.problem.V)
         self.cell_gather = CellGather(self.domain)
+        self._handles = moving_pins(scene)  # stats' handle_work needs computing
         #: The fields the trajectory holds at every dof (``output.fields``), by name.
         self.dof_gathers = self._dof_gathers()
         self.clock.add("compile", self.problem.compile_s)
@@ -300,6 +303,8 @@ class Simulation:
         start = time.perf_counter()
         self._contact_stats(row=False)  # this step's contact time only (not failed tries')
         new, solve = self.step(state, dt)
+        work = handle_work(self.problem, state.u, self.problem.x_work) if self._handles \
+            else 0.0
         energies = self.problem.energies()
         self._check_finite(new, energies)
         wall = time.perf_counter() - start
@@ -313,6 +318,7 @@ class Simulation:
             "hessian_assemblies": solve.hessian_assemblies,
             "factorisations": solve.factorisations,
             **{f"{kind}_its": count for kind, count in solve.hessian_its.items()}, **energies,
+            "handle_work": work,
             "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,
             "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,

@@ -948,6 +948,26 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_export_p2.py::"
               "test_p2_export_is_the_quadratic_field_on_the_refined_surface",),
              "the refined triangles take the wrong edge's midside dof"),
+    Mutation("handle-work-unweighted", "fem_anim/simulation/handle_work.py",
+             "return p.comm.allreduce(work, op=MPI.SUM) / float(p.weight.value)",
+             "return p.comm.allreduce(work, op=MPI.SUM)",
+             ("tests/test_energy_balance.py::"
+              "test_handle_work_recomputed_from_the_written_fields",),
+             "the handles' work is grad g . du, not divided by the weight w"),
+    Mutation("handle-work-no-inertia", "fem_anim/simulation/handle_work.py",
+             "    if p.constant_terms is not None:\n", "    if False:\n",
+             ("tests/test_energy_balance.py::"
+              "test_handle_work_recomputed_from_the_written_fields",),
+             "the pin's force leaves out the inertia M a"),
+    Mutation("handle-gain-unflagged", "fem_anim/simulation/energy_report.py",
+             "gained = dissipated < -DAMPED_THRESHOLD * moved", "gained = False",
+             ("tests/test_energy_balance.py::test_a_gain_beyond_the_handles_work_is_flagged",),
+             "a stored energy rising beyond the handles' work passes unflagged"),
+    Mutation("contact-rest-alarm", "fem_anim/simulation/energy_report.py",
+             "came_to_rest = _contact(scene) and at_rest", "came_to_rest = False",
+             ("tests/test_energy_balance.py::"
+              "test_a_body_at_rest_on_the_ground_says_nothing_alarming",),
+             "a body settled on the ground is told its step damped the motion away"),
 ]
 
 
