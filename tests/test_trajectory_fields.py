@@ -205,3 +205,45 @@ def test_frames_merged_before_a_kill_keep_their_fields(tmp_path):
         np.testing.assert_array_equal(h5["velocity_nodes"][()], nodes["velocity"])
     with pytest.raises(OSError, match="output.fields changed"):
         TrajectoryWriter(path, sim.domain, 2, nodes | {"pressure": nodes["velocity"]})
+
+
+@pytest.mark.mpi
+def test_two_ranks_write_the_serial_fields_and_handle_work(tmp_path):
+    """Under ``mpirun -n 2`` every dof row names the same dof (the same nodes) and holds the
+    serial value to 1e-8; each step's handle work agrees likewise."""
+    import csv
+    import subprocess
+
+    from conftest import clean_environment, fem_anim_command, mpirun_command
+
+    handle = {"name": "handle", "min": [1.0 - 1e-6, -1.0, -1.0],
+              "max": [1.0 + 1e-6, 1.0, 1.0], "velocity": [0.0, 0.0, 0.05]}
+    scene = bar("p2mpi", element={"degree": 2}, pin=[bar("x")["pin"][0], handle],
+                time={"dt": H, "steps": 3, "integrator": "implicit_euler"},
+                output={"render": False, "fields": ["velocity"]})
+    make_scene(tmp_path, scene)
+    outs = {}
+    for ranks in (1, 2):
+        prefix = [] if ranks == 1 else mpirun_command(2)
+        if prefix is None:
+            pytest.skip("mpirun not available")
+        out = tmp_path / f"out{ranks}"
+        r = subprocess.run(prefix + fem_anim_command() + ["run", "-q", "p2mpi.toml", "-o",
+                                                          str(out)],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                           env=clean_environment())
+        assert r.returncode == 0, r.stderr
+        outs[ranks] = out
+    a, b = (_dof_datasets(outs[k] / "trajectory.h5") for k in (1, 2))
+    assert sorted(a) == sorted(b) and "displacement_dofs3" in a
+    for name, data in a.items():
+        if name.endswith("_nodes"):
+            np.testing.assert_array_equal(b[name], data, err_msg=name)
+        else:
+            np.testing.assert_allclose(b[name], data, rtol=0,
+                                       atol=1e-8 * max(np.abs(data).max(), 1e-30),
+                                       err_msg=name)
+    works = [[float(r["handle_work"]) for r in csv.DictReader(open(outs[k] / "stats.csv"))]
+             for k in (1, 2)]
+    assert max(works[0]) > 0.0
+    np.testing.assert_allclose(works[1], works[0], rtol=1e-8)
