@@ -1,7 +1,8 @@
 """A run as mesh sequences: one OBJ or PLY file per body per frame.
 
 Each body's boundary surface (:mod:`fem_anim.export.boundary`, triangles wound
-counter-clockwise seen from outside; a P2 body's refined through its edge dofs) is written at every frame as
+counter-clockwise seen from outside; a P2 body's refined through its edge dofs) is written
+at every frame as
 ``<body>_<frame>.<obj|ply>``, the frame number ``start_frame + k`` zero-padded to at least
 four digits (Blender's and Houdini's sequence importers count the files by that number).
 The writers are plain numpy: OBJ as text (``o <body>``, ``v`` lines to nine significant

@@ -3,7 +3,8 @@
 A run directory (:mod:`fem_anim.output.rundir`) holds ``trajectory.h5`` (rest points,
 cells, each frame's vertex displacements and cell energy densities, the cells' body
 numbers and, for a P2 body, every dof of its displacement: ``displacement_nodes`` and
-``displacement_dofs{k}``, :mod:`fem_anim.output.trajectory`) and ``scene.json`` (the validated scene: its name, bodies, obstacles, gravity).
+``displacement_dofs{k}``, :mod:`fem_anim.output.trajectory`) and ``scene.json`` (the
+validated scene: its name, bodies, obstacles, gravity).
 :func:`read_run` gathers them into a :class:`RunData`; the exporters take that and nothing
 else, so a finished run and a run's staging area (read before it is installed) export
 the same way.

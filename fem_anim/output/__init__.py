@@ -4,7 +4,8 @@
 and writes ``stats.csv``, ``final.vtu`` and ``scene.json`` through a staging area;
 :mod:`~fem_anim.output.dof_gather` does it for every dof of a P1
 or P2 field (the trajectory's ``output.fields``); :mod:`~fem_anim.output.trajectory` writes
-the trajectory (XDMF + HDF5) so that a kill at any moment leaves it continuable; :mod:`~fem_anim.output.rundir` marks, locks and installs a run
+the trajectory (XDMF + HDF5) so that a kill at any moment leaves it continuable;
+:mod:`~fem_anim.output.rundir` marks, locks and installs a run
 directory so fem_anim only ever replaces files it wrote, and
 :mod:`~fem_anim.output.products` keeps that promise for every other command writing into
 a folder a user names; :mod:`~fem_anim.output.provenance`

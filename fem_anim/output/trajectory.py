@@ -135,14 +135,16 @@ class TrajectoryWriter:
             try:
                 with h5py.File(self.frame_file(k), "r") as f:
                     self.times.append(float(f.attrs["time"]))
-                    for name in self.nodes:  # a run begun with other output.fields
-                        if f"{name}_dofs" not in f:
-                            raise KeyError(f"no {name} field: output.fields changed")
+                    missing = [name for name in self.nodes if f"{name}_dofs" not in f]
             except (OSError, KeyError) as err:
                 raise OSError(getattr(err, "errno", 0) or 0,
                               f"holds {k} readable frames where the checkpoint expects {keep} "
                               f"({err}; the run cannot be continued from it)",
                               str(self.frame_file(k))) from None
+            if missing:  # a run begun with other output.fields
+                raise OSError(0, f"has no {', '.join(missing)} field, which output.fields "
+                              "lists now: continue with the output.fields the run began "
+                              "with", str(self.frame_file(k)))
         # every kept frame is in its own file now: the mesh file is free (and gets the cells'
         # body and the fields' nodes if a run begun before they were written lacks them)
         self._write_mesh()
