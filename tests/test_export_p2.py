@@ -98,3 +98,42 @@ def test_p2_usd_points_are_the_obj_points(p2_run):
     ply = meshio.read(out / "ply" / f"p2bar_{int(end):04d}.ply")
     np.testing.assert_allclose(points, ply.points, rtol=0, atol=1e-6)
     np.testing.assert_array_equal(triangles, ply.cells_dict["triangle"])
+
+
+@pytest.mark.slow
+def test_blender_reads_the_refined_p2_surface(p2_run, tmp_path):
+    """Blender (bpy) imports the P2 run's USD file and OBJ sequence: at the first, a middle
+    and the last frame its vertices are the refined surface's, to float32 round-off."""
+    import json
+    import subprocess
+
+    from test_blender_roundtrip import BLENDER_SCRIPT, bpy_python
+
+    from fem_anim.export.run_reader import read_run
+
+    out, _, _ = p2_run
+    python = bpy_python()
+    assert main(["export", str(out), "--format", "usd", "-q"]) == 0
+    assert main(["export", str(out), "--format", "obj", "-q"]) == 0
+    run = read_run(out)
+    n = len(run.times)
+    frames = sorted({0, n // 2, n - 1})
+    request = {"frames": {str(1 + k): run.body_names for k in frames},
+               "obj": {str(1 + k): {name: str(out / "obj" / f"{name}_{1 + k:04d}.obj")
+                                    for name in run.body_names} for k in frames}}
+    script, report_file = tmp_path / "check.py", tmp_path / "blender.json"
+    script.write_text(BLENDER_SCRIPT)
+    done = subprocess.run([str(python), str(script), str(out / "p2bar.usdc"),
+                           str(out / "obj"), json.dumps(request), str(report_file)],
+                          capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads(report_file.read_text())
+    surface = run.surfaces()[0]
+    rest = run.surface_points()
+    for k in frames:
+        expected = (rest + run.surface_displacement(k))[surface.vertices]
+        tol = 2.0 ** -22 * np.abs(expected).max()
+        for kind in ("usd", "obj"):
+            got = report[kind][str(1 + k)]["p2bar"]
+            assert np.allclose(got["points"], expected, rtol=0, atol=tol), (kind, k)
+            assert np.array_equal(got["faces"], surface.triangles), kind
