@@ -247,3 +247,36 @@ def test_two_ranks_write_the_serial_fields_and_handle_work(tmp_path):
              for k in (1, 2)]
     assert max(works[0]) > 0.0
     np.testing.assert_allclose(works[1], works[0], rtol=1e-8)
+
+
+def test_dof_rows_hold_the_field_at_their_nodes(tmp_path):
+    """A P2 field interpolated from a known function: row (i, j) holds it at the midpoint of
+    input vertices i and j (at vertex i when i == j); scattered back it is the field; a P3
+    space, whose dofs sit at thirds of the edges, is refused."""
+    from dolfinx import fem
+    from mpi4py import MPI
+
+    from fem_anim import compat
+    from fem_anim.mesh.bodies import build_scene_mesh
+    from fem_anim.output.dof_gather import DofGather
+
+    domain = build_scene_mesh(MPI.COMM_WORLD, _p2_scene(tmp_path, ["velocity"]))
+    V = compat.vector_space(domain.mesh, 2)
+    u = fem.Function(V)
+
+    def field(x):
+        return np.stack([x[0] ** 2, x[1] * x[0], np.sin(3.0 * x[2])])
+
+    u.interpolate(field)
+    gather = DofGather(domain, V)
+    rows = gather.gather(u.x.array)
+    if MPI.COMM_WORLD.rank == 0:
+        at = 0.5 * (domain.points[gather.nodes[:, 0]] + domain.points[gather.nodes[:, 1]])
+        np.testing.assert_allclose(rows, field(at.T).T, rtol=0, atol=1e-14)
+        assert rows.shape[0] == gather.nodes.shape[0] > domain.points.shape[0]
+    back = fem.Function(V)
+    gather.scatter(rows, back.x.array)
+    back.x.scatter_forward()
+    np.testing.assert_allclose(back.x.array, u.x.array, rtol=0, atol=1e-14)
+    with pytest.raises(ValueError, match="degree 1 or 2"):
+        DofGather(domain, compat.vector_space(domain.mesh, 3))

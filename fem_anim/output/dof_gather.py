@@ -23,7 +23,31 @@ from mpi4py import MPI
 from fem_anim import compat
 from fem_anim.mesh.simplex import SimplexMesh
 
-__all__ = ["DofGather"]
+__all__ = ["DofGather", "CHUNK"]
+
+
+#: Cells whose dof-to-candidate distances are compared at once (bounds the memory: 10 MB
+#: for P2 tetrahedra).
+CHUNK = 4096
+
+
+def _nearest(dof_x: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """For each cell's dofs ``(c, ndofs, 3)``, the candidate point ``(c, k, 3)`` it sits on.
+
+    Raises:
+        ValueError: a dof not unambiguously at one candidate.
+    """
+    dist = np.linalg.norm(dof_x[:, :, None, :] - candidates[:, None, :, :], axis=3)
+    order = np.argsort(dist, axis=2)
+    best = np.take_along_axis(dist, order[:, :, :1], 2)
+    second = np.take_along_axis(dist, order[:, :, 1:2], 2)
+    # unambiguous whatever the coordinates' size: a P2 dof is at its vertex or midpoint up
+    # to round-off, a P3 dof (at a third of an edge) only half as far from its nearest
+    # candidate as from the next
+    if np.any(best > 1e-3 * second):
+        raise ValueError("a dof sits neither at a vertex nor at an edge midpoint: only "
+                         "Lagrange spaces of degree 1 or 2 are gathered")
+    return order[:, :, 0]
 
 
 class DofGather:
@@ -56,17 +80,9 @@ class DofGather:
         candidates = 0.5 * (x[:, a] + x[:, b])  # (c, k, 3)
         cell_dofs = np.asarray(compat.cell_dofs(V)[:num_cells], dtype=np.int64)
         dof_x = V.tabulate_dof_coordinates()[cell_dofs]  # (c, ndofs, 3)
-        dist = np.linalg.norm(dof_x[:, :, None, :] - candidates[:, None, :, :], axis=3)
-        order = np.argsort(dist, axis=2)
-        pick = order[:, :, 0]  # (c, ndofs)
-        best = np.take_along_axis(dist, order[:, :, :1], 2)
-        second = np.take_along_axis(dist, order[:, :, 1:2], 2)
-        # unambiguous whatever the coordinates' size: a P2 dof is at its vertex or midpoint
-        # up to round-off, a P3 dof (at a third of an edge) only half as far from its
-        # nearest candidate as from the next
-        if np.any(best > 1e-3 * second):
-            raise ValueError("a dof sits neither at a vertex nor at an edge midpoint: "
-                             "only Lagrange spaces of degree 1 or 2 are gathered")
+        pick = np.concatenate([_nearest(dof_x[k: k + CHUNK], candidates[k: k + CHUNK])
+                               for k in range(0, num_cells, CHUNK)] +
+                              [np.empty((0, cell_dofs.shape[1]), np.int64)])
         i = np.take_along_axis(vertex, a[pick], 1)
         j = np.take_along_axis(vertex, b[pick], 1)
         key = np.stack([np.minimum(i, j), np.maximum(i, j)], axis=-1).reshape(-1, 2)
