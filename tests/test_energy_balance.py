@@ -17,12 +17,15 @@ import json
 import h5py
 import numpy as np
 import pytest
+from mpi4py import MPI
 from scenes import bar, make_scene, merge, wall_pin
 
 from fem_anim.cli import main
 from fem_anim.reference.assembly import elastic_gradient
 from fem_anim.reference.mass import mass_matrix
 from fem_anim.reference.materials import lame_parameters
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: one run per process")
 
 H, E, NU, RHO = 0.02, 2e4, 0.3, 1000.0
 HANDLE = {"name": "handle", "min": [1.0 - 1e-6, -1.0, -1.0], "max": [1.0 + 1e-6, 1.0, 1.0],

@@ -12,9 +12,13 @@ from __future__ import annotations
 import meshio
 import numpy as np
 import pytest
+from mpi4py import MPI
 from scenes import bar, make_scene
 
 from fem_anim.cli import main
+
+
+pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: one run per process")
 
 
 def assert_closed_and_consistent(triangles: np.ndarray) -> None:

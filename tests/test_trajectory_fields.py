@@ -12,9 +12,13 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
+from mpi4py import MPI
 from scenes import bar, make_scene, merge
 
 H = 0.01
+#: Runs in this process that read their files back: each process has its own tmp_path.
+serial = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: one run per process "
+                            "(the two-rank case launches mpirun itself)")
 
 
 def _p2_scene(tmp_path, fields, **overrides):
@@ -30,7 +34,7 @@ def _local(sim, V, nodes: np.ndarray, rows: np.ndarray) -> np.ndarray:
     from fem_anim.simulation.checkpoint import dof_identity
 
     keys = dof_identity(V, sim.domain)
-    base = sim.comm.allreduce(int(sim.domain.input_index.max(initial=-1)) + 1)
+    base = sim.comm.allreduce(int(sim.domain.input_index.max(initial=-1)) + 1, op=MPI.MAX)
     file_keys = nodes[:, 0] * base + nodes[:, 1]
     order = np.argsort(file_keys)
     where = order[np.searchsorted(file_keys, keys, sorter=order)]
@@ -43,6 +47,7 @@ def _read(out, name: str, k: int):
         return h5[f"{name}_nodes"][()], h5[f"{name}_dofs{k}"][()]
 
 
+@serial
 def test_p2_step_residual_recomputed_from_the_written_fields(tmp_path):
     """Each step of a P2 bar's run: stage the step objective from frame n's displacement
     and velocity (implicit Euler: y = u_n + h v_n), put frame n+1's displacement in, and
@@ -84,6 +89,7 @@ def test_p2_step_residual_recomputed_from_the_written_fields(tmp_path):
                                    atol=1e-9 * np.abs(v_next_rows).max())
 
 
+@serial
 def test_mixed_pressure_written_satisfies_the_step_equations(tmp_path):
     """An incompressible P2-P1 bar: frame n+1's (u, p) read back from the file zeroes the
     mixed step's residual to 1e-6 of the pressure's own force term (the residual with
@@ -151,6 +157,7 @@ def _dof_datasets(path) -> dict[str, np.ndarray]:
         return {k: h5[k][()] for k in h5 if "_dofs" in k or "_nodes" in k}
 
 
+@serial
 def test_resumed_run_writes_the_same_fields(tmp_path):
     """Interrupted after step 2 and resumed: every dof dataset equals an uninterrupted
     run's, bit for bit (serial, direct solver)."""
@@ -175,6 +182,7 @@ def test_resumed_run_writes_the_same_fields(tmp_path):
         np.testing.assert_array_equal(resumed[name], data, err_msg=name)
 
 
+@serial
 def test_frames_merged_before_a_kill_keep_their_fields(tmp_path):
     """A kill after the merge: the resumed writer takes the kept frames' fields back out of
     ``trajectory.h5``; a resume whose kept frames lack a field (output.fields changed) is an
@@ -207,6 +215,7 @@ def test_frames_merged_before_a_kill_keep_their_fields(tmp_path):
         TrajectoryWriter(path, sim.domain, 2, nodes | {"pressure": nodes["velocity"]})
 
 
+@serial
 @pytest.mark.mpi
 def test_two_ranks_write_the_serial_fields_and_handle_work(tmp_path):
     """Under ``mpirun -n 2`` every dof row names the same dof (the same nodes) and holds the
@@ -254,7 +263,6 @@ def test_dof_rows_hold_the_field_at_their_nodes(tmp_path):
     input vertices i and j (at vertex i when i == j); scattered back it is the field; a P3
     space, whose dofs sit at thirds of the edges, is refused."""
     from dolfinx import fem
-    from mpi4py import MPI
 
     from fem_anim import compat
     from fem_anim.mesh.bodies import build_scene_mesh
