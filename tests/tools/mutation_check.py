@@ -540,7 +540,7 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_export.py::test_usd_time_samples_are_the_trajectory",),
              "frame k written at time code start + k + 1"),
     Mutation("export-rest-points", "fem_anim/export/usd_stage.py",
-             "        x = run.points + u\n", "        x = run.points + 0.0 * u\n",
+             "        x = rest + u\n", "        x = rest + 0.0 * u\n",
              ("tests/test_export.py::test_usd_time_samples_are_the_trajectory",),
              "every time sample the rest shape"),
     Mutation("export-left-handed", "fem_anim/export/usd_stage.py",
@@ -1087,6 +1087,65 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_newton_pace.py::"
               "test_landing_stack_keeps_newton_iterations_low_with_the_predictor_start",),
              "the barrier's exact Hessian only once a step meets the test (3 iterations at rest)"),
+    Mutation("dof-gather-edge-order", "fem_anim/output/dof_gather.py",
+             "edges = np.unique(every[~vertex_rows], axis=0)",
+             "edges = np.unique(every[~vertex_rows], axis=0)[::-1]",
+             ("tests/test_trajectory_fields.py::"
+              "test_p2_step_residual_recomputed_from_the_written_fields",),
+             "a P2 field's edge rows written in another order than their nodes"),
+    Mutation("frame-velocity-is-displacement", "fem_anim/simulation/loop.py",
+             '"velocity": lambda: state.v,', '"velocity": lambda: state.u,',
+             ("tests/test_trajectory_fields.py::"
+              "test_p2_step_residual_recomputed_from_the_written_fields",),
+             "the trajectory's velocity field holds the displacement"),
+    Mutation("frame-pressure-unscaled", "fem_anim/simulation/loop.py",
+             '"pressure": lambda: float(p.mu.value) * p.p.x.array}',
+             '"pressure": lambda: p.p.x.array}',
+             ("tests/test_trajectory_fields.py::"
+              "test_mixed_pressure_written_satisfies_the_step_equations",),
+             "the mixed run's pressure written as p / mu, not in Pa"),
+    Mutation("resume-drops-merged-fields", "fem_anim/output/trajectory.py",
+             "for name in self.nodes\n                                           if",
+             "for name in ()\n                                           if",
+             ("tests/test_trajectory_fields.py::"
+              "test_frames_merged_before_a_kill_keep_their_fields",),
+             "a resume after the merge loses the kept frames' dof fields"),
+    Mutation("p2-export-vertices-only", "fem_anim/export/run_reader.py",
+             "if nodes is not None and np.all(nodes[:, 0] == nodes[:, 1]):",
+             "if nodes is not None:",
+             ("tests/test_export_p2.py::"
+              "test_p2_export_is_the_quadratic_field_on_the_refined_surface",),
+             "a P2 run exported through its vertex values only (flat triangles)"),
+    Mutation("p2-refine-midpoints-swapped", "fem_anim/export/boundary.py",
+             "ab, bc, ca = row(a, b), row(b, c), row(c, a)",
+             "ab, bc, ca = row(b, c), row(a, b), row(c, a)",
+             ("tests/test_export_p2.py::"
+              "test_p2_export_is_the_quadratic_field_on_the_refined_surface",),
+             "the refined triangles take the wrong edge's midside dof"),
+    Mutation("handle-work-unweighted", "fem_anim/simulation/handle_work.py",
+             "return p.comm.allreduce(work, op=MPI.SUM) / float(p.weight.value)",
+             "return p.comm.allreduce(work, op=MPI.SUM)",
+             ("tests/test_energy_balance.py::"
+              "test_handle_work_recomputed_from_the_written_fields",),
+             "the handles' work is grad g . du, not divided by the weight w"),
+    Mutation("handle-work-no-inertia", "fem_anim/simulation/handle_work.py",
+             "    if p.constant_terms is not None:\n", "    if False:\n",
+             ("tests/test_energy_balance.py::"
+              "test_handle_work_recomputed_from_the_written_fields",),
+             "the pin's force leaves out the inertia M a"),
+    Mutation("handle-gain-unflagged", "fem_anim/simulation/energy_report.py",
+             "gained = dissipated < -DAMPED_THRESHOLD * moved", "gained = False",
+             ("tests/test_energy_balance.py::test_a_gain_beyond_the_handles_work_is_flagged",),
+             "a stored energy rising beyond the handles' work passes unflagged"),
+    Mutation("contact-rest-alarm", "fem_anim/simulation/energy_report.py",
+             "came_to_rest = _contact(scene) and at_rest", "came_to_rest = False",
+             ("tests/test_energy_balance.py::"
+              "test_a_body_at_rest_on_the_ground_says_nothing_alarming",),
+             "a body settled on the ground is told its step damped the motion away"),
+    Mutation("dof-gather-accepts-p3", "fem_anim/output/dof_gather.py",
+             "    if np.any(best > 1e-3 * second):", "    if False:",
+             ("tests/test_trajectory_fields.py::test_dof_rows_hold_the_field_at_their_nodes",),
+             "a P3 field's dofs (at thirds of edges) named as if at vertices and midpoints"),
 ]
 
 
