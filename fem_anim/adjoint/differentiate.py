@@ -10,15 +10,18 @@ states (:mod:`fem_anim.adjoint.tape`), evaluates the objective
 one-call form at the scene's own values.
 
 What is differentiated: implicit Euler, BDF2 and Newmark; the displacement formulation with
-one material whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...);
-gravity, Rayleigh damping, pins and moving handles. Refused with one line (a
-:class:`~fem_anim.errors.FemAnimError`): contact (obstacles, IPC), the mixed formulation,
-symplectic Euler, materials computing quadrature data outside UFL (corotated in 3D), regions and
-bodies.
+materials whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...), per
+region and per body; gravity, Rayleigh damping, pins and moving handles; with implicit
+Euler and BDF2 also obstacles (barrier and lagged friction: exact) and IPC contact (the
+barrier exact; friction with its lagged normal forces and tangent bases held fixed:
+:mod:`fem_anim.adjoint.backward`). Refused with one line (a
+:class:`~fem_anim.errors.FemAnimError`): Newmark with contact, the mixed formulation,
+symplectic Euler, materials computing quadrature data outside UFL (corotated in 3D).
 """
 
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -42,12 +45,10 @@ def check_differentiable(scene) -> None:
     Raises:
         FemAnimError: naming the scene feature.
     """
-    refused = [("obstacle", "obstacles"), ("contact", "IPC contact"), ("body", "[[body]]"),
-               ("region", "[[region]]")]
-    for key, what in refused:
-        if scene.get(key):
-            raise FemAnimError(f"gradient: scenes with {what} are not differentiable yet "
-                               "(contact and friction are outside the adjoint)")
+    contact = bool(scene.get("obstacle")) or "contact" in scene.data
+    if contact and scene["time"]["integrator"] == "newmark":
+        raise FemAnimError("gradient: time.integrator = \"newmark\" with contact (obstacles "
+                           "or [contact]) is not differentiable (implicit_euler or bdf2)")
     if scene["element"].get("formulation", "displacement") == "mixed":
         raise FemAnimError("gradient: element.formulation = \"mixed\" is not differentiable yet")
     if scene["time"]["integrator"] not in ("implicit_euler", "bdf2", "newmark"):
@@ -56,6 +57,44 @@ def check_differentiable(scene) -> None:
     if scene["solver"]["mode"] != "exact":
         raise FemAnimError("gradient: solver.mode must be \"exact\" (a preview step is not "
                            "converged, so it has no derivative)")
+
+
+def converged_scene(scene):
+    """The scene with contact's default IPC step test replaced by the residual norm test.
+
+    ``solver.stopping = "auto"`` stops a contact scene's Newton at IPC's step test, whose
+    residual is only small against the step's forces (:mod:`fem_anim.solver.stopping`); a
+    step's derivative holds at its stationary point, so the adjoint's forward steps are
+    converged by ||r|| to :data:`ADJOINT_OPTIONS`' tolerances (or to the round-off floor).
+
+    Returns:
+        The scene itself, or a copy with ``solver.stopping = "norm"``.
+    """
+    contact = bool(scene.get("obstacle")) or "contact" in scene.data
+    if not contact or scene["solver"]["stopping"] != "auto":
+        return scene
+    data = copy.deepcopy(scene.data)
+    data["solver"]["stopping"] = "norm"
+    return type(scene)._of(data, scene.source, scene.base_dir)
+
+
+def exact_near_minimiser(minimiser, problem) -> None:
+    """Let Newton switch IPC's Hessian from its per-pair projection to the exact one once
+    its steps are small (as the ``"step"`` test does), under the norm test too: with the
+    projection alone Newton converges only linearly near a resting contact and stalls at
+    the round-off floor above the norm test's tolerance.
+
+    Args:
+        minimiser: The simulation's :class:`~fem_anim.solver.minimiser.Minimiser`.
+        problem: Its :class:`~fem_anim.problem.objective.EnergyProblem` (with ``[contact]``).
+    """
+    from fem_anim.solver.stopping import scene_diagonal
+
+    x = problem.domain.mesh.geometry.x[:, : problem.domain.mesh.geometry.dim]
+    if not minimiser.step_tol:
+        minimiser.step_tol = float(problem.scene["solver"]["step_tol"]) * \
+            scene_diagonal(problem.comm, x)
+    minimiser._exact_near = True
 
 
 class AdjointModel:
@@ -77,9 +116,12 @@ class AdjointModel:
         from fem_anim.simulation.loop import Simulation
 
         check_differentiable(scene)
+        scene = converged_scene(scene)
         self.scene = scene
         self.sim = Simulation(scene, comm, cli_options=ADJOINT_OPTIONS | (cli_options or {}))
         self.problem = p = self.sim.problem
+        if p.ipc is not None:
+            exact_near_minimiser(self.sim.minimiser, p)
         if p.quadrature_data:
             raise FemAnimError(f"gradient: material.model = {scene['material']['model']!r} "
                                "computes quadrature data outside UFL; not differentiable yet")
