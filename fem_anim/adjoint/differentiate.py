@@ -36,7 +36,7 @@ __all__ = ["ADJOINT_OPTIONS", "AdjointModel", "gradient"]
 
 #: The forward solver's tolerances while differentiating (below the command line's options):
 #: each step converged far below the derivative's accuracy.
-ADJOINT_OPTIONS = {"snes_rtol": "1e-12", "snes_atol": "1e-13"}
+ADJOINT_OPTIONS = {"snes_rtol": "1e-14", "snes_atol": "5e-13"}
 
 
 def check_differentiable(scene) -> None:
