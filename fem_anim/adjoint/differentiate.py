@@ -132,7 +132,7 @@ class AdjointModel:
         self.tape: Tape | None = None
         #: Wall time (s) of the last evaluation's forward run and backward sweep.
         self.timing = {"forward": 0.0, "backward": 0.0}
-        self._bound: set[int] = set()
+        self._bound: list = []  # kept alive: an id is unique only while its object lives
 
     @property
     def names(self) -> list[str]:
@@ -172,9 +172,9 @@ class AdjointModel:
     def bind(self, objective) -> None:
         """Prepare an objective for this model, once (collective; raises its bad input,
         e.g. a target run on another mesh)."""
-        if id(objective) not in self._bound:
+        if not any(o is objective for o in self._bound):
             objective.bind(self)
-            self._bound.add(id(objective))
+            self._bound.append(objective)
 
 
 def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORLD,
