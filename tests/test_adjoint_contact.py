@@ -22,9 +22,14 @@ refusals (Newmark with contact, a body or region the scene lacks) are one clear 
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
-from test_adjoint import orders, scene_dict
+from conftest import ROOT, clean_environment, mpirun_command
+from test_adjoint import orders
 
 import fem_anim
 from fem_anim.adjoint.differentiate import AdjointModel
@@ -168,3 +173,38 @@ def test_contact_gradient_equals_central_differences(scene, integrator):
     fd = central_differences(model, obj, theta)
     # a component 1e6 below the largest (the cubes' spin-free z velocity) is FD noise
     np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+
+
+def mpi_gradients() -> dict:
+    """J and the gradient of the obstacle scene with friction and of the IPC cubes (BDF2),
+    on any number of ranks."""
+    out = {}
+    for scene in ("plane_friction", "ipc"):
+        model = model_for(scene, "bdf2")
+        J, grad = model.evaluate(model.parameters.values(), SCENES[scene][2]())
+        out[scene] = {"J": J, "grad": list(map(float, grad))}
+    return out
+
+
+@pytest.mark.mpi
+def test_contact_gradients_on_two_ranks_equal_serial():
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    r = subprocess.run([*mpirun, sys.executable, __file__], capture_output=True, text=True,
+                       timeout=900, env=clean_environment(), cwd=ROOT)
+    assert r.returncode == 0, r.stdout + r.stderr
+    parallel = json.loads(r.stdout.strip().splitlines()[-1])
+    serial = mpi_gradients()
+    for scene, result in serial.items():
+        assert parallel[scene]["J"] == pytest.approx(result["J"], rel=1e-8), scene
+        np.testing.assert_allclose(parallel[scene]["grad"], result["grad"], rtol=1e-8,
+                                   atol=1e-8 * np.abs(result["grad"]).max())
+
+
+if __name__ == "__main__":
+    from mpi4py import MPI
+
+    result = mpi_gradients()
+    if MPI.COMM_WORLD.rank == 0:
+        print(json.dumps(result))
