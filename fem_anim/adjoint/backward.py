@@ -171,12 +171,12 @@ class BackwardSweep:
 
     def cell_vector(self, name: str) -> np.ndarray:
         """A DG0 vector form assembled: its owned entries (one per owned cell)."""
-        vec = compat.petsc_vec(self.cell_work)
-        with vec.localForm() as loc:
+        cells = compat.petsc_vec(self.cell_work)
+        with cells.localForm() as loc:
             loc.set(0.0)
-        fem_petsc.assemble_vector(vec, self.forms[name])
-        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        return vec.array.copy()
+        fem_petsc.assemble_vector(cells, self.forms[name])
+        cells.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return cells.array.copy()
 
     def dot(self, a: np.ndarray, b: np.ndarray) -> float:
         """Sum of a * b over the owned dofs of all ranks."""
