@@ -29,7 +29,8 @@ import sys
 import numpy as np
 import pytest
 from conftest import ROOT, clean_environment, mpirun_command
-from test_adjoint import orders
+from scenes import scene_toml
+from test_adjoint import fem_anim_cli, orders
 
 import fem_anim
 from fem_anim.adjoint.differentiate import AdjointModel
@@ -173,6 +174,30 @@ def test_contact_gradient_equals_central_differences(scene, integrator):
     fd = central_differences(model, obj, theta)
     # a component 1e6 below the largest (the cubes' spin-free z velocity) is FD noise
     np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("change,message", [
+    ({"time": {"steps": 2, "dt": 0.01, "integrator": "newmark"}}, "with contact"),
+    ({"param": ["body.middle.material.density"]}, "no body 'middle'"),
+    ({"param": ["body.left.initial.velocity", "initial.velocity"]}, "own initial velocities"),
+    ({"param": ["material.youngs_modulus"]}, "own materials"),
+])
+def test_bad_contact_input_is_one_line(tmp_path, change, message):
+    """``fem-anim fit`` refuses with one line and exit code 2 (before reading the target:
+    its trajectory file here is empty)."""
+    d = cubes_scene("implicit_euler")
+    params = change.pop("param", ["body.left.material.youngs_modulus"])
+    d |= change
+    (tmp_path / "scene.toml").write_text(scene_toml(d))
+    (tmp_path / "ref").mkdir()
+    (tmp_path / "ref" / "trajectory.h5").write_bytes(b"")
+    args = [a for p in params for a in ("--param", p)]
+    r = fem_anim_cli(["fit", "scene.toml", "--target", "ref", *args, "-o", "fit", "-q"],
+                     tmp_path)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fem-anim: error: "), r.stderr
+    assert message in lines[0], lines[0]
 
 
 def mpi_gradients() -> dict:

@@ -26,6 +26,15 @@ sweep is the transpose of exactly the forward code. Newmark's a_0 solves
 M a_0 = -grad E(0) - C v_0 (seed eq. 1b) and is differentiated the same way, with M in
 place of H.
 
+Contact (seed eq. 4's E holds it): an obstacle's barrier and lagged friction are UFL terms
+of g, so H holds their exact Hessian and, friction's pressure and normal being lagged at
+u_n = ``u_prev``, -d<R, lambda>/du_prev joins the adjoint of u_n (exact). IPC's barrier
+and friction live outside UFL: their unprojected Hessian (ipctk) times w is added to H,
+with each step's kappa as the forward recorded it (:class:`~fem_anim.adjoint.tape.Tape`;
+kappa and d_hat are constants of the step, the adaptive schedule is not differentiated);
+friction's slip x - x_n is differentiated (+w Hess D lambda into the adjoint of u_n), its
+lagged normal forces and tangent bases are held fixed.
+
 Adjoint arrays are local dof arrays whose ghost entries equal their owners' (contributions
 are summed to the owners, then copied back to the ghosts), so the sweep is the same on any
 number of ranks.
@@ -85,7 +94,7 @@ class BackwardSweep:
 
     Args:
         problem: The :class:`~fem_anim.problem.objective.EnergyProblem` (displacement
-            formulation, no contact, no quadrature data).
+            formulation, no quadrature data).
         parameters: Its :class:`~fem_anim.adjoint.parameters.ParameterSet`.
         newmark: Whether a_0 is computed from the equations of motion (Newmark).
     """

@@ -7,8 +7,8 @@ BDF2's u_{n-1}, v_{n-1}: local dof arrays). That is all the backward sweep needs
 re-stages each step's objective from the state at its start and re-assembles the exact
 Hessian at the state at its end; with ``[contact]`` it also keeps each step's IPC barrier
 stiffness kappa (the adaptive schedule is restarted at every forward run, so the run is
-the same function of the parameters each time). The memory is :attr:`Tape.nbytes` (about 5 x 8 bytes per
-local dof and step; no checkpointing: for short runs).
+the same function of the parameters each time). The memory is :attr:`Tape.nbytes` (about
+5 x 8 bytes per local dof and step; no checkpointing: for short runs).
 
 A step whose Newton iteration did not converge to its test (kept at the iteration budget
 or at the round-off floor) has no defined derivative: :func:`record_forward` raises.
@@ -61,8 +61,8 @@ def start_state(sim, parameters) -> State:
     """The state at t = 0 with the parameters' initial velocity (collective).
 
     v_0 is the scene's rigid field with its translational part replaced by the parameters'
-    ``initial.velocity`` and each body's (v_0 is affine in them); Newmark's a_0 = M^-1 (f(0) - C v_0) is
-    computed from the current material (seed eq. 1b).
+    ``initial.velocity`` and each body's (v_0 is affine in them); Newmark's
+    a_0 = M^-1 (f(0) - C v_0) is computed from the current material (seed eq. 1b).
     """
     p = sim.problem
     n = p.u.x.array.size
