@@ -639,7 +639,7 @@ MUTATIONS: list[Mutation] = [
     Mutation("adjoint-body-velocity-everywhere", "fem_anim/adjoint/parameters.py",
              "        if dofs is None:\n            basis[:, i] = 1.0",
              "        if True:\n            basis[:, i] = 1.0",
-             ("tests/test_adjoint_contact.py::test_contact_gradient_equals_central_differences",),
+             ("tests/test_adjoint_contact.py::test_body_parameters_are_the_scenes_values",),
              "a body's initial velocity parameter moves every body"),
     Mutation("adjoint-damping-alpha-not-refreshed", "fem_anim/adjoint/parameters.py",
              "        values |= {k: np.array([v]) for k, v in self.damping.items()}\n", "",
