@@ -32,8 +32,9 @@ u_n = ``u_prev``, -d<R, lambda>/du_prev joins the adjoint of u_n (exact). IPC's 
 and friction live outside UFL: their unprojected Hessian (ipctk) times w is added to H,
 with each step's kappa as the forward recorded it (:class:`~fem_anim.adjoint.tape.Tape`;
 kappa and d_hat are constants of the step, the adaptive schedule is not differentiated);
-friction's slip x - x_n is differentiated (+w Hess D lambda into the adjoint of u_n), its
-lagged normal forces and tangent bases are held fixed.
+friction's dependence on u_n, through its slip x - x_n and through the normal forces and
+tangent bases lagged at x_n (ipctk's ``force_jacobian`` with respect to the lagged
+displacements), joins the adjoint of u_n: exact.
 
 Adjoint arrays are local dof arrays whose ghost entries equal their owners' (contributions
 are summed to the owners, then copied back to the ghosts), so the sweep is the same on any
@@ -276,7 +277,7 @@ class BackwardSweep:
             if self.lagged:  # R's dependence on u_n through the lagged friction
                 target["u"] = target["u"] - self.vector("prev")
             if p.ipc is not None and p.ipc.friction is not None:
-                target["u"] = target["u"] + self._ipc_slip_bar()
+                target["u"] = target["u"] + self._ipc_friction_bar()
         v_bar = state_bars[0].get("v", zero)
         if self.newmark:
             v_bar = v_bar + self._initial_acceleration(tape.states[0], state_bars[0], grad)
@@ -305,21 +306,39 @@ class BackwardSweep:
             ipc.weight = float(p.weight.value)
             ipc.restage(tape.barrier_stiffness[n], h)
 
-    def _ipc_slip_bar(self) -> np.ndarray:
-        """-dR/du_n^T lambda of IPC's lagged friction through its slip x - x_n only:
-        + w Hess D(x - x_n) lambda (exact Hessian). The normal forces and tangent bases
-        lagged at x_n are held fixed: their dependence on u_n is not differentiated."""
+    def _ipc_friction_bar(self) -> np.ndarray:
+        """-dR/du_n^T lambda of IPC's lagged friction (collective).
+
+        R holds w grad D(x; x_n) = -w F(x_n, v) with F ipctk's friction force, v = x - x_n
+        the slip and the normal forces and tangent bases taken at x_n, so
+        dR/du_n = -w (dF/dx_n - dF/dv) and
+
+            -dR/du_n^T lambda = w (dF/dx_n)^T lambda + w Hess D lambda
+
+        (``force_jacobian`` with respect to the lagged displacements, and the exact,
+        unprojected Hessian of D).
+        """
+        import ipctk
+
         ipc = self.problem.ipc
         lam = ipc.positions(self.lam.x.array)
         x = ipc._update()
         rows = None
         if ipc.comm.rank == 0:
-            import ipctk
-            Hd = ipc.friction.hessian(ipc.tangential, ipc.mesh, x - ipc._x_lagged,
-                                      ipctk.PSDProjectionMethod.NONE)
+            w = float(self.problem.weight.value)
             free = ipc.free  # per surface dof: not pinned
-            out = Hd @ (lam.ravel() * free)
-            rows = (float(self.problem.weight.value) * out * free).reshape(-1, ipc.gdim)
+            lam = lam.ravel() * free
+            rest = ipc.mesh.rest_positions
+            slip = x - ipc._x_lagged
+            Hd = ipc.friction.hessian(ipc.tangential, ipc.mesh, slip,
+                                      ipctk.PSDProjectionMethod.NONE)
+            normal = ipctk.BarrierPotential(ipc.dhat, ipc.kappa, True)
+            Jl = ipc.friction.force_jacobian(
+                ipc.tangential, ipc.mesh, np.asfortranarray(rest),
+                np.asfortranarray(ipc._x_lagged - rest), np.asfortranarray(slip), normal,
+                ipctk.TangentialPotential.DiffWRT.LAGGED_DISPLACEMENTS)
+            out = Hd @ lam + Jl.T @ lam
+            rows = (w * out * free).reshape(-1, ipc.gdim)
         mine = ipc._scatter(rows)
         local = np.zeros_like(self.lam.x.array)
         local.reshape(-1, ipc.gdim)[ipc.blocks] = mine

@@ -12,9 +12,8 @@ one-call form at the scene's own values.
 What is differentiated: implicit Euler, BDF2 and Newmark; the displacement formulation with
 materials whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...), per
 region and per body; gravity, Rayleigh damping, pins and moving handles; with implicit
-Euler and BDF2 also obstacles (barrier and lagged friction: exact) and IPC contact (the
-barrier exact; friction with its lagged normal forces and tangent bases held fixed:
-:mod:`fem_anim.adjoint.backward`). Refused with one line (a
+Euler and BDF2 also obstacles and IPC contact, barrier and lagged friction, exactly
+(:mod:`fem_anim.adjoint.backward`; kappa and d_hat held fixed). Refused with one line (a
 :class:`~fem_anim.errors.FemAnimError`): Newmark with contact, the mixed formulation,
 symplectic Euler, materials computing quadrature data outside UFL (corotated in 3D).
 """

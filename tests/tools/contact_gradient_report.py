@@ -26,6 +26,7 @@ from fem_anim.adjoint.differentiate import AdjointModel  # noqa: E402
 from test_adjoint_contact import (BODY, MATERIAL, cubes_objective, cubes_scene,  # noqa: E402
                                   plane_objective, plane_scene)
 
+ONLY = sys.argv[1:]
 CASES = [("obstacle plane", lambda i: plane_scene(i), MATERIAL, plane_objective),
          ("obstacle plane, friction 0.5", lambda i: plane_scene(i, friction=0.5), MATERIAL,
           plane_objective),
@@ -35,7 +36,7 @@ CASES = [("obstacle plane", lambda i: plane_scene(i), MATERIAL, plane_objective)
 
 
 def main() -> None:
-    for label, build, params, objective in CASES:
+    for label, build, params, objective in [c for c in CASES if not ONLY or c[0] in ONLY]:
         for integrator in ("implicit_euler", "bdf2"):
             model = AdjointModel(fem_anim.Scene.from_dict(build(integrator)), params)
             obj = objective()
