@@ -119,10 +119,11 @@ class Run:
         with self._h5() as h5:
             return np.asarray(h5["data1"])
 
-    @property
+    @cached_property
     def dim(self) -> int:
-        """The mesh dimension, 2 or 3."""
-        return self.cells.shape[1] - 1
+        """The space dimension, 2 or 3 (a shell's triangles lie in 3D: ``mesh.dim``)."""
+        scene = json.loads((self.outdir / "scene.json").read_text())["scene"]
+        return int(scene["mesh"]["dim"])
 
     def displacement(self, frame: int) -> np.ndarray:
         """The vertex displacements of one frame, ``(vertices, dim)`` (m); positions are

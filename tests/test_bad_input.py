@@ -389,8 +389,10 @@ CORPUS = [
         "[contact]\ndhat = 0.05\n" + BODY.format(name="a", offset=0.0)
         + '[[body]]\nname = "b"\noffset = [0.5, 0, 0]\n'
         'mesh = { shape = "box", size = [0.1, 0.1, 0.02], element_size = 0.02 }\n'),
-    Bad("contact-p2", ("[contact]", "element.degree = 1 only, got 2"),
-        "[contact]\n[element]\ndegree = 2\n"),
+    Bad("mixed-bodies-two-materials", ("body[1].material must equal body[0].material",),
+        "[element]\ndegree = 2\nformulation = \"mixed\"\n[contact]\n"
+        + BODY.format(name="a", offset=0.0) + BODY.format(name="b", offset=0.5).replace(
+            "[[body]]", "[[body]]\nmaterial = { youngs_modulus = 2e5 }", 1)),
     Bad("contact-stiffness-word", ("contact.stiffness must be a number of Pa or \"adaptive\"",),
         '[contact]\nstiffness = "stiff"\n'),
     Bad("body-duplicate-name", ("body[1].name = 'a' is already used by body[0]",),

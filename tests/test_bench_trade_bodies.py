@@ -1,7 +1,7 @@
 """The trade study on a multi-body contact scene: the project's own pile of four bodies.
 
 Reduced: two steps of 20 ms against steps of 10 ms, the reference at 2.5 ms. The scene has
-``[contact]``, which takes P1 only, so the reference keeps the scene's degree (a finer
+``[contact]``, whose P2 surface is the P1 one refined, so the reference keeps the scene's degree (a finer
 step and a tight Newton tolerance) instead of the P2 it takes elsewhere; the bodies' regions
 are their own (the mesh is the union of the ``[[body]]`` meshes).
 """

@@ -342,8 +342,10 @@ BAD_SHELLS = {
     "negative thickness": ("", "thickness = 0.002", "thickness = -0.001", "shell.thickness"),
     "2D scene": ("", "[mesh]\n", "[mesh]\ndim = 2\n", "mesh.dim = 3"),
     "P2": ("[element]\ndegree = 2\n", "", "", "element.degree = 1 only"),
-    "contact": ("[[obstacle]]\ntype = \"plane\"\nnormal = [0.0, 0.0, 1.0]\npoint = "
-                "[0.0, 0.0, -1.0]\n", "", "", "codimensional contact"),
+    "contact without self": ("[contact]\nself = false\n", "", "", "contact.self = true"),
+    "obstacle, consistent mass": ("[[obstacle]]\ntype = \"plane\"\nnormal = [0.0, 0.0, 1.0]"
+                                  "\npoint = [0.0, 0.0, -1.0]\n", "", "",
+                                  "material.mass = \"lumped\""),
     "sheet without [shell]": ("", "[shell]\nthickness = 0.002\n", "", "add a [shell] table"),
     "solid model": ("", "model = \"stvk\"", "model = \"corotated\"", "no membrane form"),
     "negative bending": ("", "thickness = 0.002", "thickness = 0.002\nbending = -1.0",

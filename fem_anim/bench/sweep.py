@@ -147,7 +147,7 @@ def expand_study(path: str | None, base_overrides: list[str], sweeps: list[str],
                                              duration, interval))
     ref_overrides = [f"time.dt={min(dts) / 4.0!r}", "element.degree=2",
                      "solver.petsc.snes_rtol=1e-10"]
-    if _degree_one_only(base):  # the scene refuses P2: a finer step and mesh only
+    if _keeps_degree(base):  # contact between surfaces: a finer step and mesh only
         ref_overrides.remove("element.degree=2")
     for key, overrides in parsed:
         if key == "mesh.element_size":
@@ -165,9 +165,10 @@ def expand_study(path: str | None, base_overrides: list[str], sweeps: list[str],
     return Study(base, configurations, reference, duration, interval, frames)
 
 
-def _degree_one_only(scene: Scene) -> bool:
-    """Whether the scene's cross-key rules refuse P2 elements (``[contact]`` between
-    surfaces takes P1 only: :mod:`fem_anim.scene.consistency`)."""
+def _keeps_degree(scene: Scene) -> bool:
+    """Whether the reference keeps the scene's degree: with ``[contact]`` between surfaces,
+    whose P2 surface is the P1 one refined (:mod:`fem_anim.contact.p2_surface`), so a P2
+    reference would touch on another surface than the configurations it judges."""
     return "contact" in scene.data
 
 

@@ -4,8 +4,11 @@
 smooth barrier with lagged friction over the exterior facets, with the step bound that keeps
 every trial point outside them; :mod:`~fem_anim.contact.ipc` wraps the IPC Toolkit for contact
 between surfaces (bodies with each other and with themselves: barrier, continuous collision
-detection, friction) under MPI; :mod:`~fem_anim.contact.intersection` is an independent check,
-on the tetrahedra alone, that no frame of a run has an intersection. Public names load lazily.
+detection, friction) under MPI, on the surface :mod:`~fem_anim.contact.contact_surface` gives
+(a solid's boundary, or a shell's triangles kept its thickness apart) and
+:mod:`~fem_anim.contact.p2_surface` puts on the displacement's dofs (P2 facets split on their
+midpoint dofs); :mod:`~fem_anim.contact.intersection` is an independent check, on the cells
+alone, that no frame of a run has an intersection. Public names load lazily.
 """
 
 from fem_anim.lazy_exports import lazy_exports
@@ -13,7 +16,12 @@ from fem_anim.lazy_exports import lazy_exports
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "boundary_triangles": "intersection",
     "crossed_frames": "intersection",
+    "crossing_pairs": "intersection",
+    "is_shell": "contact_surface",
+    "surface_entities": "contact_surface",
     "surface_collision_mesh": "intersection",
+    "tetra10_cells": "intersection",
+    "surface_faces": "p2_surface",
     "IPCContact": "ipc",
     "KEEP_FRACTION": "obstacles",
     "ObstacleContact": "obstacles",

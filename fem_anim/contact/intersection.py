@@ -5,27 +5,156 @@ exterior facets; this check builds its own from the tetrahedra alone (the triang
 belong to one tetrahedron only), so a wrong surface there does not hide a crossing here,
 and asks ipctk's ``has_intersections`` of every frame. Demos and tests run it on the
 frames read back from ``trajectory.xdmf``.
+
+A shell (cells that are triangles) is its own surface, and is checked without ipctk:
+:func:`crossing_pairs` tests every pair of triangles that share no vertex (adjacent
+triangles meet along their shared edge or vertex by construction) and whose bounding boxes
+overlap (a sweep along x), in numpy, by the segment-triangle test: two such triangles cross
+iff an edge of one passes through the other (its ends on opposite sides of the other's
+plane, the crossing point inside it). Distances to a plane below 1e-10 of the scene's size
+count as zero. It takes any triangle soup, so a sheet and a solid's boundary triangles
+(:func:`boundary_triangles`) are checked together by stacking them. Exactly coplanar pairs
+(both ends of every edge on the other's plane) are not reported: the check is for crossings,
+which contact keeps the shell's thickness away from.
+
+Quadratic tetrahedra (10 nodes, VTK's ``tetra10`` order: the 4 vertices, then the nodes on
+the edges 01, 12, 02, 03, 13, 23) are checked on their boundary triangles split in four at
+the edge nodes (the contact surface of :mod:`fem_anim.contact.p2_surface`, built here from
+the node order alone); :func:`tetra10_cells` puts DOLFINx's P2 cell dofs in that order by
+their coordinates (the node nearest each vertex and each edge midpoint), so no part of the
+check shares the contact code's reading of the dof layout.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["boundary_triangles", "crossed_frames", "surface_collision_mesh"]
+__all__ = ["boundary_triangles", "crossed_frames", "crossing_pairs", "surface_collision_mesh",
+           "tetra10_cells"]
+
+#: Rows of the triangles compared at once in :func:`crossing_pairs` (bounds the memory).
+CHUNK = 256
+
+#: The vertices of a tetrahedron's faces, and (tetra10) each face's edge nodes: the node on
+#: edge (i, j) of VTK's order, for the face's edges (v0 v1), (v1 v2), (v2 v0).
+_FACES = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
+_EDGE_NODE = {(0, 1): 4, (1, 2): 5, (0, 2): 6, (0, 3): 7, (1, 3): 8, (2, 3): 9}
+_FACE_EDGES = np.array([[_EDGE_NODE[tuple(sorted((f[i], f[(i + 1) % 3])))] for i in range(3)]
+                        for f in _FACES])
 
 
 def boundary_triangles(cells: np.ndarray) -> np.ndarray:
     """Triangles of a tetrahedral mesh that belong to one tetrahedron only.
 
     Args:
-        cells: The tetrahedra, (cells, 4) vertex indices.
+        cells: The tetrahedra, (cells, 4) vertex indices, or (cells, 10) node indices of
+            quadratic ones (``tetra10`` order, module docstring).
 
     Returns:
-        The boundary triangles, (triangles, 3) int32 vertex indices, each row sorted.
+        The boundary triangles, (triangles, 3) int32 vertex indices: for 4-node cells each
+        row sorted; for 10-node cells each boundary face split into four at its edge nodes.
     """
-    faces = np.sort(cells[:, [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]]].reshape(-1, 3), axis=1)
-    unique, counts = np.unique(faces, axis=0, return_counts=True)
-    return unique[counts == 1].astype(np.int32)
+    corners = cells[:, _FACES].reshape(-1, 3)
+    faces = np.sort(corners, axis=1)
+    unique, index, counts = np.unique(faces, axis=0, return_index=True, return_counts=True)
+    if cells.shape[1] == 4:
+        return unique[counts == 1].astype(np.int32)
+    once = index[counts == 1]  # rows of the boundary faces among cells x 4 faces
+    a, b, c = corners[once].T
+    ab, bc, ca = cells[:, _FACE_EDGES].reshape(-1, 3)[once].T
+    split = np.stack([np.stack(t, 1) for t in
+                      ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))], 1)
+    return split.reshape(-1, 3).astype(np.int32)
+
+
+def tetra10_cells(corners: np.ndarray, nodes: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Quadratic cells in ``tetra10`` order, by the coordinates of their nodes.
+
+    Args:
+        corners: The cells' vertex coordinates, (cells, 4, 3), in the order wanted.
+        nodes: The cells' 10 node indices in any order, (cells, 10).
+        points: The nodes' coordinates, (nodes, 3).
+
+    Returns:
+        (cells, 10) node indices: the node at each vertex, then at the midpoint of the
+        edges 01, 12, 02, 03, 13, 23.
+
+    Raises:
+        ValueError: if a cell's nodes are not its vertices and edge midpoints.
+    """
+    pairs = sorted(_EDGE_NODE, key=_EDGE_NODE.get)
+    mids = np.stack([(corners[:, i] + corners[:, j]) / 2 for i, j in pairs], 1)
+    targets = np.concatenate([corners, mids], axis=1)  # (cells, 10, 3)
+    x = points[nodes]  # (cells, 10, 3)
+    dist = np.linalg.norm(targets[:, :, None, :] - x[:, None, :, :], axis=3)
+    pick = dist.argmin(axis=2)
+    size = np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1)
+    if np.any(np.sort(pick, axis=1) != np.arange(10)) or \
+            np.any(dist.min(axis=2) > 1e-8 * size[:, None]):
+        raise ValueError("the nodes are not the cells' vertices and edge midpoints")
+    return np.take_along_axis(nodes, pick, axis=1)
+
+
+def _segment_crosses(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray,
+                     c: np.ndarray, tol: float) -> np.ndarray:
+    """Whether segment pq passes through triangle abc (touching counts), row by row.
+
+    The ends' signed distances to the triangle's plane have opposite signs (a distance
+    below ``tol`` counts as zero; both zero: coplanar, not reported), and the point where pq
+    meets the plane has barycentric coordinates >= 0 in abc.
+    """
+    n = np.cross(b - a, c - a)
+    area2 = np.linalg.norm(n, axis=1)
+    sp, sq = (np.einsum("ij,ij->i", n, e - a) / area2 for e in (p, q))
+    sp[np.abs(sp) < tol], sq[np.abs(sq) < tol] = 0.0, 0.0
+    through_plane = (sp * sq <= 0) & ((sp != 0) | (sq != 0))
+    s = np.where(through_plane, sp / np.where(through_plane, sp - sq, 1.0), 0.0)
+    r = p + s[:, None] * (q - p) - a
+    e1, e2 = b - a, c - a
+    d11, d12, d22 = (np.einsum("ij,ij->i", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
+    r1, r2 = np.einsum("ij,ij->i", r, e1), np.einsum("ij,ij->i", r, e2)
+    det = d11 * d22 - d12 ** 2
+    beta, gamma = (d22 * r1 - d12 * r2) / det, (d11 * r2 - d12 * r1) / det
+    eps = 1e-12
+    inside = (beta >= -eps) & (gamma >= -eps) & (beta + gamma <= 1 + eps)
+    return through_plane & inside
+
+
+def crossing_pairs(x: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Pairs of triangles sharing no vertex that cross each other (module docstring).
+
+    Args:
+        x: Vertex positions, (vertices, 3).
+        triangles: (triangles, 3) vertex indices.
+
+    Returns:
+        (pairs, 2) indices i < j of the crossing triangles (empty: no intersection).
+    """
+    order = np.argsort(x[triangles].min(axis=1)[:, 0], kind="stable")  # sweep along x
+    tri = np.asarray(triangles, dtype=np.int64)[order]
+    corners = x[tri]  # (T, 3, 3)
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    tol = 1e-10 * float(np.linalg.norm(np.ptp(x, axis=0)))  # round-off of the positions
+    found = []
+    for start in range(0, tri.shape[0], CHUNK):
+        rows = np.arange(start, min(start + CHUNK, tri.shape[0]))
+        # later triangles (in x order) that start before the chunk ends along x
+        cols = np.arange(start, np.searchsorted(lo[:, 0], hi[rows, 0].max(), side="right"))
+        overlap = np.all((lo[rows, None] <= hi[None, cols]) & (lo[None, cols] <= hi[rows, None]),
+                         axis=2)
+        overlap &= rows[:, None] < cols[None]
+        i, j = np.nonzero(overlap)
+        i, j = rows[i], cols[j]
+        shared = (tri[i][:, :, None] == tri[j][:, None, :]).any(axis=(1, 2))
+        i, j = i[~shared], j[~shared]
+        hit = np.zeros(i.size, bool)
+        for s, t in ((i, j), (j, i)):  # an edge of s through triangle t
+            a, b, c = (corners[t, k] for k in range(3))
+            for e0, e1 in ((0, 1), (1, 2), (2, 0)):
+                hit |= _segment_crosses(corners[s, e0], corners[s, e1], a, b, c, tol)
+        pairs = np.sort(order[np.stack([i[hit], j[hit]], axis=1)], axis=1)
+        found.append(pairs)
+    return np.concatenate(found) if found else np.empty((0, 2), np.int64)
 
 
 def crossed_frames(points: np.ndarray, cells: np.ndarray, frames) -> list[int]:
@@ -33,12 +162,16 @@ def crossed_frames(points: np.ndarray, cells: np.ndarray, frames) -> list[int]:
 
     Args:
         points: The rest positions of the vertices, (vertices, 3).
-        cells: The tetrahedra, (cells, 4) vertex indices.
+        cells: The tetrahedra, (cells, 4) vertex indices (or (cells, 10), quadratic), or a
+            shell's triangles, (cells, 3).
         frames: An iterable of displacements, each (vertices, 3), in vertex order.
 
     Returns:
-        The indices k of ``frames`` where ipctk's ``has_intersections`` is true.
+        The indices k of ``frames`` where ipctk's ``has_intersections`` is true (solids), or
+        where :func:`crossing_pairs` finds a pair (a shell's triangles).
     """
+    if cells.shape[1] == 3:
+        return [k for k, u in enumerate(frames) if len(crossing_pairs(points + u, cells))]
     import ipctk
 
     mesh, used = surface_collision_mesh(points, cells)
@@ -52,7 +185,7 @@ def surface_collision_mesh(points: np.ndarray, cells: np.ndarray):
 
     Args:
         points: The rest positions of the vertices, (vertices, 3).
-        cells: The tetrahedra, (cells, 4) vertex indices.
+        cells: The tetrahedra, (cells, 4) vertex indices (or (cells, 10), quadratic).
 
     Returns:
         The collision mesh (its vertices the surface vertices, at rest) and ``used``, the

@@ -13,11 +13,13 @@ surface area, so kappa is a pressure in Pa and B is in J, like the obstacles' ba
 of :mod:`fem_anim.forms.obstacle_contact`). B is +inf at contact, so every trial point
 of the line search is kept on the collision-free part of the Newton segment by ipctk's
 continuous collision detection (:meth:`IPCContact.step_bound`): no accepted state has an
-intersection.
+intersection. A shell's surface is its triangles, kept its thickness apart
+(:mod:`fem_anim.contact.contact_surface`: the ``offset`` d_min).
 
 ipctk is serial: this module is its one MPI wrapper. The surface vertices (P1
-dofs on the exterior facets) are numbered by their global dof block, in order, so each
-rank owns a contiguous run of them; each evaluation gathers their positions x = X + u to
+dofs on the exterior facets; for P2 also the facets' edge-midpoint dofs, each facet split in
+four on them: :mod:`fem_anim.contact.p2_surface`) are numbered by their global dof block,
+in order, so each rank owns a contiguous run of them; each evaluation gathers their positions x = X + u to
 rank 0, which builds the collision set and evaluates there, then broadcasts scalars and
 sends each rank the gradient entries and Hessian rows it owns. The Hessian is
 projected to PSD per pair (IPC's projection) and dropped on pinned dofs (they are
@@ -45,11 +47,11 @@ import time
 
 import ipctk
 import numpy as np
-from dolfinx import mesh as dmesh
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fem_anim import compat
+from fem_anim.contact.contact_surface import surface_entities
+from fem_anim.contact.p2_surface import surface_faces
 from fem_anim.errors import SceneError
 
 __all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "narrow_phase_ccd"]
@@ -78,23 +80,32 @@ class IPCContact:
 
     Args:
         cfg: The validated ``[contact]`` table.
-        u: The displacement Function (P1).
+        u: The displacement Function (P1 or P2).
         pinned: Local dof indices (unblocked) held by Dirichlet conditions.
         body_names: Names of the bodies by marker - 1 (for messages).
         cell_body: Body index of each local cell.
+        offset: The minimum distance d_min the barrier keeps (m): 0 for solids, a shell's
+            thickness (:mod:`fem_anim.contact.contact_surface`); B acts on d^2 - d_min^2
+            with activation d_min + d_hat, and the CCD stops at d_min.
+        unknown: For a mixed (u, p) unknown, ``(W, u_dofs)``: its space and the map from
+            each local dof of ``V`` (unrolled) to the local dof of ``W`` holding it; the
+            barrier's gradient and Hessian then go to those rows of the unknown (the
+            displacement block only: the barrier does not depend on the pressure). None:
+            the unknown is ``u``.
 
     Raises:
         SceneError: (collectively) if two bodies cross or are within ``dhat`` at rest.
     """
 
     def __init__(self, cfg: dict, u, pinned: np.ndarray, body_names: list[str],
-                 cell_body: np.ndarray):
+                 cell_body: np.ndarray, offset: float = 0.0, unknown=None):
         V = u.function_space
         mesh = V.mesh
         self.comm: MPI.Comm = mesh.comm
         ipctk.set_num_threads(1)  # repeatable sums (module docstring)
         self.cfg, self.u = cfg, u
         self.dhat = float(cfg["dhat"])
+        self.offset = float(offset)
         self.gdim = g = mesh.geometry.dim
         tdim = mesh.topology.dim
         index_map = V.dofmap.index_map
@@ -102,17 +113,13 @@ class IPCContact:
         mesh.topology.create_connectivity(tdim - 1, tdim)
         mesh.topology.create_connectivity(tdim - 1, 0)
         mesh.topology.create_connectivity(tdim, 0)
-        vertex_dof = np.empty(mesh.topology.index_map(0).size_local
-                              + mesh.topology.index_map(0).num_ghosts, dtype=np.int64)
         c_to_v = mesh.topology.connectivity(tdim, 0).array.reshape(-1, tdim + 1)
-        vertex_dof[c_to_v.ravel()] = compat.cell_dofs(V)[:, : tdim + 1].ravel()
-        facets = dmesh.exterior_facet_indices(mesh.topology)
-        f_to_v = mesh.topology.connectivity(tdim - 1, 0).array.reshape(-1, tdim)
-        f_to_c = mesh.topology.connectivity(tdim - 1, tdim)
-        local_faces = vertex_dof[f_to_v[facets]]
+        # the surface (a solid's boundary facets, a shell's triangles), P2 split on midpoints
+        entity_vertices, entity_cells = surface_entities(mesh)
+        local_faces, parent = surface_faces(V, entity_vertices, c_to_v)
         faces = index_map.local_to_global(local_faces.ravel().astype(np.int32)).reshape(
-            -1, tdim)
-        face_body = cell_body[f_to_c.array[f_to_c.offsets[facets]]]
+            local_faces.shape)
+        face_body = cell_body[entity_cells[parent]]
         start = index_map.local_range[0]
         ranges = np.asarray(self.comm.allgather(index_map.local_range[1]))
         gathered = self.comm.gather((faces, face_body), root=0)
@@ -126,6 +133,10 @@ class IPCContact:
             owned_lists = np.split(self.surface, np.cumsum(self.counts)[:-1])
         self.blocks = (self.comm.scatter(owned_lists, root=0) - start).astype(np.int64)
         assert np.all(self.blocks < n_owned)
+        self.rows, global_rows = self._unknown_rows(unknown, n_owned)
+        parts = self.comm.gather(global_rows, root=0)
+        #: rank 0: the unknown's global row of each surface dof, in collision order
+        self.global_rows = np.concatenate(parts) if self.comm.rank == 0 else None
         X = V.tabulate_dof_coordinates()[self.blocks, :g]
         is_pinned = np.zeros(V.dofmap.index_map_bs * (n_owned + index_map.num_ghosts), bool)
         is_pinned[pinned] = True
@@ -146,8 +157,8 @@ class IPCContact:
         self.num_pairs = 0
         if self.comm.rank == 0:
             self.free = free.ravel() > 0.5
-            edges = ipctk.edges(self.faces) if tdim == 3 else self.faces
-            F = self.faces if tdim == 3 else np.empty((0, 3), np.int32)
+            edges = ipctk.edges(self.faces) if g == 3 else self.faces
+            F = self.faces if g == 3 else np.empty((0, 3), np.int32)
             self.mesh = ipctk.CollisionMesh(rest, np.asfortranarray(edges, np.int32),
                                             np.asfortranarray(F, np.int32))
             if not cfg["self"]:
@@ -158,11 +169,26 @@ class IPCContact:
             self.collisions.use_area_weighting = True
             self.diagonal = float(np.linalg.norm(np.ptp(rest, axis=0)))
             self.vertex_body = np.zeros(rest.shape[0], np.int64)
-            self.vertex_body[self.faces.ravel()] = np.repeat(self.face_body, tdim)
+            self.vertex_body[self.faces.ravel()] = np.repeat(self.face_body, g)
         error = self._check_rest(rest, body_names) if self.comm.rank == 0 else None
         error = self.comm.bcast(error, root=0)
         if error:
             raise SceneError(error)
+
+    def _unknown_rows(self, unknown, n_owned: int) -> tuple[np.ndarray, np.ndarray]:
+        """The local and global rows of the unknown holding the owned surface dofs
+        (unrolled, vertex-major: x, y(, z) of each vertex)."""
+        g, V = self.gdim, self.u.function_space
+        rows = (self.blocks[:, None] * g + np.arange(g)).ravel()
+        if unknown is None:
+            start = V.dofmap.index_map.local_range[0]
+            return rows, (self.blocks[:, None] + start) * g + np.arange(g)
+        W, u_dofs = unknown
+        rows = np.asarray(u_dofs)[rows].astype(np.int64)
+        bs, index_map = W.dofmap.index_map_bs, W.dofmap.index_map
+        assert np.all(rows < index_map.size_local * bs)  # owned dofs of V are owned in W
+        nodes = index_map.local_to_global((rows // bs).astype(np.int32))
+        return rows, (np.asarray(nodes, np.int64) * bs + rows % bs).reshape(-1, g)
 
     # -- the MPI seam -------------------------------------------------------------------------
     def _gather(self, local: np.ndarray) -> np.ndarray | None:
@@ -196,7 +222,7 @@ class IPCContact:
         start = time.perf_counter()
         x = self.positions()
         if self.comm.rank == 0 and (self._x is None or not np.array_equal(x, self._x)):
-            self.collisions.build(self.mesh, x, self.dhat)
+            self.collisions.build(self.mesh, x, self.dhat, self.offset)
             self._x = x
             self.num_pairs = len(self.collisions)
         self.timers["detection_s"] += time.perf_counter() - start
@@ -240,8 +266,7 @@ class IPCContact:
                                                        x - self._x_lagged)
             grad = grad.reshape(-1, self.gdim)
         mine = self._scatter(grad)
-        values = b.array.reshape(-1, self.gdim)
-        values[self.blocks] += mine
+        b.array[self.rows] += mine.ravel()
         self.timers["barrier_s"] += time.perf_counter() - start
 
     def add_hessian(self, A: PETSc.Mat, scale: float) -> None:
@@ -265,8 +290,8 @@ class IPCContact:
             H = H.tocoo()
             keep = self.free[H.row] & self.free[H.col]
             g = self.gdim
-            to_global = lambda i: self.surface[i // g] * g + i % g  # noqa: E731
-            rows, cols = to_global(H.row[keep]), to_global(H.col[keep])
+            to_global = self.global_rows.ravel()  # dof i of the surface -> the unknown's row
+            rows, cols = to_global[H.row[keep]], to_global[H.col[keep]]
             vals = scale * H.data[keep]
             ranges = np.cumsum(self.counts)  # surface vertices per rank, in rank order
             owner = np.searchsorted(ranges, H.row[keep] // g, side="right")
@@ -298,7 +323,8 @@ class IPCContact:
         dy = self.positions(y)
         start = time.perf_counter()
         alpha = float(ipctk.compute_collision_free_stepsize(
-            self.mesh, x0, x0 - dy, narrow_phase_ccd=self.ccd)) if self.comm.rank == 0 else None
+            self.mesh, x0, x0 - dy, min_distance=self.offset,
+            narrow_phase_ccd=self.ccd)) if self.comm.rank == 0 else None
         self.timers["ccd_s"] += time.perf_counter() - start
         return self.comm.bcast(alpha, root=0)
 
@@ -378,7 +404,7 @@ class IPCContact:
             weights = np.mean(self.mesh.vertex_areas) / self.dhat ** 3
             kappa, self.kappa_max = ipctk.initial_barrier_stiffness(
                 self.diagonal, self.potential.barrier, self.dhat, average_mass / weights,
-                weight * g_energy.ravel(), g_barrier)
+                weight * g_energy.ravel(), g_barrier, dmin=self.offset)
             # balanced once, where pairs exist; then only IPC's update moves it, so kappa
             # stays put while nothing changes (a pile at rest keeps one objective)
             value = self.kappa_floor if self.balanced else max(kappa, self.kappa_floor)
@@ -389,7 +415,8 @@ class IPCContact:
         self.kappa = self.kappa_ipc / weight
 
     def _min_distance(self, x: np.ndarray) -> float:
-        """Rank 0: the smallest distance of the pairs nearer than d_hat (inf if none)."""
+        """Rank 0: the smallest SQUARED distance of the pairs nearer than d_hat (m^2, inf if
+        none): ipctk's ``compute_minimum_distance``, the quantity its stiffness update takes."""
         return float(self.collisions.compute_minimum_distance(self.mesh, x)) \
             if self.num_pairs else np.inf
 
@@ -421,7 +448,7 @@ class IPCContact:
             was lagged (IPC's normal force and tangent basis taken at x_n: 1 with friction).
         """
         x = self._update()
-        d = self._min_distance(x) if self.comm.rank == 0 else None
+        d = np.sqrt(self._min_distance(x)) if self.comm.rank == 0 else None  # ipctk's is d^2
         return {"barrier_stiffness": self.kappa, "dhat": self.dhat,
                 "contact_pairs": self.comm.bcast(self.num_pairs, root=0),
                 "min_distance": self.comm.bcast(d, root=0),
@@ -435,14 +462,15 @@ class IPCContact:
         d = self._min_distance(x)
         if np.isfinite(d) and np.isfinite(self._distance):
             self.kappa_floor = ipctk.update_barrier_stiffness(
-                self._distance, d, self.kappa_max, self.kappa_floor, self.diagonal)
+                self._distance, d, self.kappa_max, self.kappa_floor, self.diagonal,
+                dmin=self.offset)
 
     def _check_rest(self, x: np.ndarray, names: list[str]) -> str | None:
         """Rank 0: no surfaces cross, no two bodies within d_hat at rest (None: fine).
 
         Pairs of one body within d_hat are legal (a thin part): the barrier is finite there.
         """
-        self.collisions.build(self.mesh, x, self.dhat)
+        self.collisions.build(self.mesh, x, self.dhat, self.offset)
         ids = [c.vertex_ids(self.mesh.edges, self.mesh.faces) for c in self.collisions]
         pairs = {tuple(sorted({int(self.vertex_body[v]) for v in vs if v >= 0})) for vs in ids}
         between = sorted(p for p in pairs if len(p) == 2)
@@ -452,6 +480,12 @@ class IPCContact:
                 return (f"at rest, bodies {names[a]!r} and {names[b]!r} intersect; move them "
                         "apart (body offset)")
             return "at rest, the bodies' surfaces intersect (a mesh crosses itself)"
+        if self.offset > 0 and len(self.collisions) and \
+                self.collisions.compute_minimum_distance(self.mesh, x) <= self.offset:
+            d = self.collisions.compute_minimum_distance(self.mesh, x)
+            return (f"at rest, two non-adjacent elements of a shell are {d:.3g} m apart, not "
+                    f"more than its thickness {self.offset} m (the contact offset); make the "
+                    "shell thinner or its elements larger")
         if between:
             a, b = between[0]
             return (f"at rest, bodies {names[a]!r} and {names[b]!r} are closer than "

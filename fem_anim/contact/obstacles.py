@@ -18,6 +18,13 @@ facets' degree-2 Gauss points (the body's boundary between them is not checked).
 are evaluated by a compiled :class:`dolfinx.fem.Expression` at the facet points mapped
 into the reference cell, as FFCx maps them for ``ds``, on the cells owning each exterior
 facet; minima are reduced over all ranks, so every rank takes the same decision.
+
+A thin shell (a triangle surface in 3D) has no exterior facets to speak of: its contact
+points are the vertices of every triangle (the vertex rule over ``dx``, the lumped mass's,
+so kappa stays a pressure on the mid-surface's area), and the obstacle is grown by the
+shell's half-thickness t / 2 (a plane moved along its normal, a sphere's radius enlarged): d
+is the distance of the shell's face, not of its mid-surface
+(:mod:`fem_anim.contact.contact_surface`).
 """
 
 from __future__ import annotations
@@ -78,21 +85,27 @@ class ObstacleContact:
         u_prev: The displacement at the start of the step (friction's lagged state).
         degree: Lagrange degree of ``u``.
         youngs_modulus: The default of ``obstacle.stiffness``.
+        offset: How far from the obstacle the body's surface lies (m): 0 for a solid, half
+            the thickness of a shell (whose mesh is its mid-surface).
 
     Raises:
         SceneError: (collectively) if the rest configuration touches or crosses an obstacle.
     """
 
     def __init__(self, obstacles: list[dict], u: fem.Function, u_prev: fem.Function,
-                 degree: int, youngs_modulus: float):
+                 degree: int, youngs_modulus: float, offset: float = 0.0):
         mesh = u.function_space.mesh
         self.comm: MPI.Comm = mesh.comm
         self.obstacles = obstacles
         self.gdim = mesh.geometry.dim
         self.u = u
         self.direction = fem.Function(u.function_space, name="contact_direction")
-        points, metadata = contact_quadrature(degree, mesh.topology.dim)
-        self.ds = ufl.Measure("ds", domain=mesh, metadata=metadata)
+        #: a shell's contact points are its triangles' vertices (module docstring)
+        self.shell = mesh.topology.dim < self.gdim
+        points, metadata = contact_quadrature(degree, mesh.topology.dim + self.shell)
+        if self.shell:  # the lumped mass's rule: one rule per kernel (FFCx 0.5, shell_rules)
+            metadata = {"quadrature_rule": "vertex", "quadrature_degree": 1}
+        self.ds = ufl.Measure("dx" if self.shell else "ds", domain=mesh, metadata=metadata)
         self.step_size = fem.Constant(mesh, PETSc.ScalarType(1.0))  # h, for eps_v h
         X = ufl.SpatialCoordinate(mesh)
         self.X = X
@@ -105,10 +118,10 @@ class ObstacleContact:
                 n = n / np.linalg.norm(n)
                 p = np.asarray(ob["point"] if ob["point"] is not None else [0.0] * self.gdim,
                                float)
-                self._distance.append((ob, {"normal": n, "point": p}))
+                self._distance.append((ob, {"normal": n, "point": p + offset * n}))
             else:
                 self._distance.append((ob, {"center": np.asarray(ob["center"], float),
-                                            "radius": float(ob["radius"])}))
+                                            "radius": float(ob["radius"]) + offset}))
         self._setup_points(points)
         self._check_rest()
         self.energy = self._sum(lambda ob, d: contact_forms.contact_energy(
@@ -186,6 +199,17 @@ class ObstacleContact:
         """Exterior facets, their cells and local indices, and the point Expression."""
         mesh = self.u.function_space.mesh
         tdim = mesh.topology.dim
+        cell = compat.basix_cell(mesh.topology.cell_name())
+        self.points_per_facet = points.shape[0]
+        g = self.gdim
+        x = self.X + self.u
+        values = ufl.as_vector([x[i] for i in range(g)] + [self.direction[i] for i in range(g)])
+        if self.shell:  # every owned triangle, its vertices (the points are the cell's)
+            self.cells = np.arange(mesh.topology.index_map(tdim).size_local, dtype=np.int32)
+            self.facet_row = np.arange(self.cells.size)
+            self.facet_local = np.zeros(self.cells.size, np.int64)
+            self.expression = compat.expression(values, points)
+            return
         mesh.topology.create_connectivity(tdim - 1, tdim)
         mesh.topology.create_connectivity(tdim, tdim - 1)
         facets = dmesh.exterior_facet_indices(mesh.topology)
@@ -197,16 +221,11 @@ class ObstacleContact:
         self.cells = self.cells.astype(np.int32)
         self.facet_row, self.facet_local = inverse, local
 
-        cell = compat.basix_cell(mesh.topology.cell_name())
         geometry = basix.geometry(cell)
         mapped = []
         for vertices in basix.topology(cell)[tdim - 1]:  # FFCx's map_facet_points
             v = geometry[vertices]
             mapped.append(v[0] + points @ (v[1:] - v[0]))
-        self.points_per_facet = points.shape[0]
-        g = self.gdim
-        x = self.X + self.u
-        values = ufl.as_vector([x[i] for i in range(g)] + [self.direction[i] for i in range(g)])
         self.expression = compat.expression(values, np.vstack(mapped))
 
     def _evaluate(self) -> tuple[np.ndarray, np.ndarray]:
@@ -293,7 +312,7 @@ class ObstacleContact:
         for i, ((ob, geo), d) in enumerate(zip(self._distance, self._distances(x))):
             dmin = self._global_min(d)
             inside = False
-            if ob["type"] == "sphere":
+            if ob["type"] == "sphere" and not self.shell:  # a surface has no inside
                 inside = self.comm.allreduce(_point_in_mesh(mesh, geo["center"]), op=MPI.LOR)
             if not dmin > 0.0 or inside:
                 what = "the sphere's centre lies inside the body" if inside and dmin > 0 else \

@@ -80,7 +80,8 @@ def build_scene_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
         domain = build_mesh(comm, scene)
         if "contact" in scene.data:
             _collective(comm, lambda: _check_extent(domain, ["body"],
-                                                    scene["contact"]["dhat"]))
+                                                    scene["contact"]["dhat"],
+                                                    "shell" in scene.data))
         return domain
     d = bodies[0]["mesh"]["dim"]
     names = [b["name"] for b in bodies]
@@ -105,12 +106,15 @@ def build_scene_mesh(comm: MPI.Comm, scene) -> SimplexMesh:
     return domain
 
 
-def _check_extent(domain: SimplexMesh, names: list[str], dhat: float) -> None:
-    """contact.dhat must be smaller than every body (its least bounding-box extent; rank 0)."""
+def _check_extent(domain: SimplexMesh, names: list[str], dhat: float,
+                  shell: bool = False) -> None:
+    """contact.dhat must be smaller than every body (its least bounding-box extent, a shell's
+    largest: a flat sheet has none across its plane; rank 0)."""
     points, cells, markers = domain.points, domain.cells, domain.cell_markers
     for k, name in enumerate(names):
         used = np.unique(cells[markers == k + 1]) if len(names) > 1 else np.unique(cells)
-        extent = float(np.ptp(points[used], axis=0).min())
+        spans = np.ptp(points[used], axis=0)
+        extent = float(spans.max() if shell else spans.min())
         if not dhat < extent:
             raise SceneError(f"contact.dhat must be smaller than every body; body {name!r} "
                              f"is only {extent:.3g} m across, got {dhat}")

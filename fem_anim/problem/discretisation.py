@@ -108,7 +108,8 @@ class Discretisation:
         self.elastic_terms = [] if self.mixed else [(self.material, self.dx_elastic)]
         self.W0 = compat.cell_space(mesh)  # per-cell data: region parameters, energy density
         self.bodies = scene.get("body") or []
-        if scene.get("region") or self.bodies:
+        # a mixed scene's bodies share one material (fem_anim.scene.consistency): constants
+        if (scene.get("region") or self.bodies) and not self.mixed:
             self._regions(body_regions(scene) if self.bodies else None)
         self.dx_mass = inertia_forms.mass_measure(dx, scene["element"]["degree"],
                                                   scene["material"]["mass"] == "lumped")

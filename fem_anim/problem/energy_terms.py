@@ -91,8 +91,10 @@ class EnergyTerms:
 
         self.contact = None  # obstacles: barrier (and friction) terms
         if scene["obstacle"]:
+            # a shell's mesh is its mid-surface: its faces lie t / 2 out
+            offset = scene["shell"]["thickness"] / 2 if "shell" in scene.data else 0.0
             self.contact = ObstacleContact(scene["obstacle"], self.u, self.u_prev, degree,
-                                           scene["material"]["youngs_modulus"])
+                                           scene["material"]["youngs_modulus"], offset)
         potential = potential_u = elastic_u if gravity_u is None else elastic_u + gravity_u
         varying = elastic_u  # the potential's terms whose Hessian changes with u
         if self.contact is not None:

@@ -143,7 +143,11 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
             pinned = np.concatenate([bc.dof_indices()[0] for bc in self.displacement_bcs] +
                                     [np.empty(0, np.int32)])
             names = [b["name"] for b in self.bodies] or ["body"]
-            self.ipc = IPCContact(self.scene["contact"], self.u, pinned, names, self.cell_body)
+            # a shell's layers stay its thickness apart (fem_anim.contact.contact_surface)
+            offset = self.scene["shell"]["thickness"] if "shell" in self.scene.data else 0.0
+            self.ipc = IPCContact(self.scene["contact"], self.u, pinned, names, self.cell_body,
+                                  offset,
+                                  (self.fields.W, self.fields.u_dofs) if self.mixed else None)
             self.average_mass = self.average_vertex_mass()
 
     # -- the step -------------------------------------------------------------------------

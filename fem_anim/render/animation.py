@@ -36,7 +36,7 @@ from fem_anim.errors import FemAnimError
 from fem_anim.output.products import staged_products
 from fem_anim.output.rundir import read_manifest
 from fem_anim.render.camera import plan_shots
-from fem_anim.render.frames import body_labels, scalar_bar_reserve, stage_of
+from fem_anim.render.frames import body_labels, scalar_bar_reserve, space_dim, stage_of
 from fem_anim.render.parallel_frames import FrameJob, frame_images, worker_count
 from fem_anim.render.render_defaults import resolve_settings
 from fem_anim.render.outer_surface import outer_faces
@@ -114,7 +114,7 @@ def read_run(path: Path) -> RunFrames:
         raise FemAnimError(f"{source} cannot be read: {type(err).__name__}: {err}") from None
     if not frames or len(blocks) != 1 or blocks[0].type not in ("triangle", "tetra"):
         raise FemAnimError(f"{source} holds no frames of one triangle or tetrahedron mesh")
-    d = 3 if blocks[0].type == "tetra" else 2
+    d = space_dim(blocks[0].type, Path(path))  # a shell's triangles lie in 3D
     cells = np.asarray(blocks[0].data)
     displacement = np.stack([np.asarray(f[1]["displacement"])[:, :d] for f in frames])
     psi = None

@@ -16,6 +16,7 @@ wheel's C++ runtime clashes with libraries DOLFINx loads.
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -270,6 +271,23 @@ def render_frame(path: Path, points: np.ndarray, cells: np.ndarray, displacement
         renderer.close()
 
 
+def space_dim(cell_type: str, directory: Path) -> int:
+    """The space dimension of a run's mesh: 3 for tetrahedra and for a shell's triangles (its
+    ``scene.json`` has a ``[shell]`` table: a surface in 3D), 2 for other triangles.
+
+    Args:
+        cell_type: meshio's cell type, ``"tetra"`` or ``"triangle"``.
+        directory: The run directory (where ``scene.json`` is).
+    """
+    if cell_type == "tetra":
+        return 3
+    try:
+        scene = json.loads((Path(directory) / "scene.json").read_text())["scene"]
+    except (OSError, KeyError, ValueError):
+        return 2
+    return 3 if "shell" in scene else 2
+
+
 def render_vtu(vtu: Path, png: Path, title: str = "", settings: dict | None = None) -> None:
     """Render a ``final.vtu``-style file to a PNG.
 
@@ -283,8 +301,9 @@ def render_vtu(vtu: Path, png: Path, title: str = "", settings: dict | None = No
     import meshio
 
     m = meshio.read(vtu)
-    d = 3 if "tetra" in m.cells_dict else 2
-    cells = m.cells_dict["tetra" if d == 3 else "triangle"]
-    psi = m.cell_data_dict.get("energy_density", {}).get("tetra" if d == 3 else "triangle")
+    kind = "tetra" if "tetra" in m.cells_dict else "triangle"
+    d = space_dim(kind, Path(vtu).parent)
+    cells = m.cells_dict[kind]
+    psi = m.cell_data_dict.get("energy_density", {}).get(kind)
     render_frame(png, m.points[:, :d], cells, m.point_data["displacement"][:, :d], psi, title,
                  settings)

@@ -67,8 +67,12 @@ def _check_formulation(data: dict[str, Any]) -> None:
     if not mat["poisson_ratio"] > 0.0:
         raise SceneError(f"material.poisson_ratio must be in (0, 0.5] {where}, got "
                          f"{mat['poisson_ratio']}")
-    if data.get("region"):
+    if data.get("region") or any(b["region"] for b in data["body"]):
         raise SceneError(f"[region] is not supported {where}")
+    for k, body in enumerate(data["body"]):
+        if body["material"] != data["body"][0]["material"]:
+            raise SceneError(f"body[{k}].material must equal body[0].material {where} (its "
+                             "bodies share one incompressible material)")
     if data["time"]["integrator"] == "symplectic_euler":
         raise SceneError(f"time.integrator = \"symplectic_euler\" is refused {where}: the "
                          "constraint must be implicit")
@@ -189,9 +193,6 @@ def check_consistency(data: dict[str, Any]) -> None:
         raise SceneError("material.mass = \"lumped\" is not supported with element.degree = 2 "
                          "(row-sum lumping of P2 gives zero or negative vertex masses); use "
                          "\"consistent\"")
-    if "contact" in data and data["element"]["degree"] != 1:
-        raise SceneError("[contact] (the IPC Toolkit's barrier between surfaces) supports "
-                         f"element.degree = 1 only, got {data['element']['degree']}")
     solver = data["solver"]
     if solver["hessian"] != "exact" and solver["method"] not in HESSIAN_METHODS:
         raise SceneError(f"solver.hessian = \"{solver['hessian']}\" modifies Newton's "

@@ -86,5 +86,9 @@ def integrator_note(data: Mapping[str, Any]) -> str | None:
     name = data["time"]["integrator"]
     why = ("it cannot gain energy at impacts" if name == "implicit_euler"
            else "second order; it lost energy at impacts in every scene measured")
-    return (f"contact scene: time.integrator = \"{name}\" ({why}; newmark is refused with "
+    note = (f"contact scene: time.integrator = \"{name}\" ({why}; newmark is refused with "
             f"contact, default {CONTACT_INTEGRATOR})")
+    if data["solver"].get("mode") == "preview":  # fem_anim.scene.modes
+        note += ("; solver.mode = \"preview\" solves each step to the stopping test here (one "
+                 "Newton step per step gains energy at impacts)")
+    return note

@@ -16,9 +16,23 @@ explicitly still wins, as does ``--solver`` on the command line.
   accepts without meeting the residual test is marked in ``stats.csv`` (reason 7,
   ``residual_ratio``), so the inexactness is visible.
 
+A scene with contact (``[[obstacle]]`` tables, ``[contact]``, or several ``[[body]]`` tables,
+which switch it on) gets none of the preview's keys: its steps are solved to the stopping test
+as in ``"exact"``. One linearisation of the barrier per step does not keep the energy of an
+impact bounded, whatever the linear solver: on ``demos/pile.toml`` the one-step preview gained
+energy (with ``cg-icc``, whose incomplete Cholesky meets the pile's indefinite exact Hessian,
+also with steps retried at half dt), and with MUMPS Cholesky it gained several times the energy
+the run exchanged (docs/contact.md, "The preview on contact scenes", measured by
+``bash docs/contact_scenes/measure_preview.sh``). The run's first line says so
+(:func:`fem_anim.scene.contact_integrator.integrator_note`).
+
 A mixed (u, p) scene that names no ``preset`` gets :data:`MIXED_DEFAULT_PRESET` (``ldlt``,
 MUMPS LDL^T with pivoting: the saddle point is symmetric indefinite, which the default
-``cholesky`` cannot factorise) in either mode, and keeps the exact Hessian; a scene whose regions
+``cholesky`` cannot factorise) in either mode, and keeps the exact Hessian; with contact it
+also gets :data:`MIXED_CONTACT_PETSC`, PETSc's secant line search on the merit function
+||r||^2/2 (``l2``): its saddle point has no objective, and at an impact backtracking (``bt``)
+fails where the barrier's residual is far from linear over a step, and the step is retried at
+half dt (measured in docs/contact.md, "P2 and mixed bodies in contact"); a scene whose regions
 use several material models, or that names another ``method`` or a ``hessian_update``,
 keeps the exact Hessian in either mode (``auto`` filters one model's tangent, and a kept
 Hessian is never filtered). The measurements behind the preview's settings are in the
@@ -31,11 +45,16 @@ from typing import Any
 
 from fem_anim.petsc_options import flatten_options
 
-__all__ = ["MIXED_DEFAULT_PRESET", "SOLVER_MODES", "apply_solver_mode"]
+__all__ = ["MIXED_CONTACT_PETSC", "MIXED_DEFAULT_PRESET", "SOLVER_MODES", "apply_solver_mode"]
 
 #: The preset a mixed (u, p) scene gets when it names none: a pivoting symmetric indefinite
 #: factorisation, exact for the saddle point (``fem-anim solvers``).
 MIXED_DEFAULT_PRESET = "ldlt"
+
+#: The PETSc options a mixed (u, p) scene with contact gets when it sets none of them: the
+#: secant line search on ||r||^2/2 (``l2``) instead of backtracking (``bt``), which fails at
+#: impacts where the barrier's residual is far from linear over a step (module docstring).
+MIXED_CONTACT_PETSC = {"snes_linesearch_type": "l2"}
 
 #: ``solver.mode`` -> the ``[solver]`` keys it fills when the scene leaves them out.
 SOLVER_MODES: dict[str, dict[str, Any]] = {
@@ -65,6 +84,10 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
         _several_models(raw) or "shell" in raw
     if mixed:  # the saddle point needs ldlt, lu or schur (fem_anim.problem.mixed_space)
         solver.setdefault("preset", MIXED_DEFAULT_PRESET)
+    if mode == "preview" and _has_contact(raw):  # converged steps (module docstring)
+        mode = "exact"
+    if mixed and _has_contact(raw):  # the merit function's line search (module docstring)
+        _fill_petsc(solver, MIXED_CONTACT_PETSC)
     for key, value in SOLVER_MODES[mode].items():
         if key == "preset" and mixed:
             continue
@@ -86,6 +109,14 @@ def _fill_petsc(solver: dict[str, Any], options: dict[str, Any]) -> None:
     for name, value in options.items():
         if name not in given:
             table[name] = value
+
+
+def _has_contact(raw: dict[str, Any]) -> bool:
+    """Whether raw scene tables declare contact: obstacles, ``[contact]``, or several bodies
+    (which switch ``[contact]`` on: :mod:`fem_anim.scene.validation`)."""
+    bodies = raw.get("body")
+    return bool(raw.get("obstacle")) or "contact" in raw or \
+        (isinstance(bodies, list) and len(bodies) > 1)
 
 
 def _several_models(raw: dict[str, Any]) -> bool:

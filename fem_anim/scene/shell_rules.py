@@ -3,10 +3,12 @@
 A shell is one body whose mesh is a triangle surface in 3D (``mesh.shape = "sheet"`` or a
 surface file), P1, with a membrane model of :mod:`fem_anim.forms.shell_membrane` and the
 hinge bending of :mod:`fem_anim.forms.shell_bending`. What its energy does not have yet is
-refused here, one rule a line: several bodies and regions, contact and obstacles (no
-codimensional contact), P2, the mixed formulation, stiffness-proportional damping, the
-Hessian filters of solids' ``psi(F)`` and the ``det F`` inversion filter (a surface's 3x3
-``det(I + grad u)`` is zero; its area ratio is positive by construction).
+refused here, one rule a line: several bodies and regions, ``[contact]`` without self
+contact (a shell scene has one body, so its only IPC pairs are the shell's own), obstacles
+with a consistent mass (the barrier's vertex rule must be the mass's), P2, the mixed
+formulation, stiffness-proportional damping, the Hessian filters of solids' ``psi(F)`` and
+the ``det F`` inversion filter (a surface's 3x3 ``det(I + grad u)`` is zero; its area ratio
+is positive by construction).
 """
 
 from __future__ import annotations
@@ -53,9 +55,13 @@ def _refuse(data: dict[str, Any]) -> str | None:
     if material["model"] not in SHELL_MODELS:
         return (f"material.model = {material['model']!r} has no membrane form: a [shell] takes "
                 f"{' or '.join(SHELL_MODELS)}")
-    if "contact" in data or data["obstacle"]:
-        return ("[shell] with [contact] or [[obstacle]] is not supported (no codimensional "
-                "contact yet): remove them")
+    if "contact" in data and not data["contact"]["self"]:
+        return ("[shell] with contact.self = false has no contact pairs (a shell scene has one "
+                "body): set contact.self = true or remove [contact]")
+    if data["obstacle"] and material["mass"] != "lumped":
+        return ("[shell] with [[obstacle]] needs material.mass = \"lumped\" (the barrier acts "
+                "at the vertices, by the lumped mass's vertex rule; FFCx 0.5 miscompiles two "
+                "rules in one kernel), got " + repr(material["mass"]))
     if data["region"]:
         return "[shell] with [[region]] is not supported: a shell has one material"
     if "damping" in data and data["damping"]["beta"] != 0:

@@ -83,14 +83,13 @@ def collision_free_guess(problem, u_pred: np.ndarray, u_last: np.ndarray, what: 
     p = problem
     u = compat.petsc_vec(p.u)
     p.u.x.array[:] = u_pred
-    fem_petsc.set_bc(u, p.bcs)
+    fem_petsc.set_bc(u, p.displacement_bcs)  # the pins on V (a mixed unknown's are on W)
     u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
     target = p.u.x.array.copy()
     p.u.x.array[:] = u_last
     alpha = p.ipc.step_bound(u_last - target)
     for guess in (u_last + alpha * (target - u_last), u_last):
-        p.u.x.array[:] = guess
-        u.copy(p.x_work)
+        p.load_guess(guess, p.x_work, apply_bcs=False)  # a mixed guess keeps its pressure
         if math.isfinite(p.objective(None, p.x_work)):
             return
     raise ConvergenceError(f"{what}: no collision-free start with every element "

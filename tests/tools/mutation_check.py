@@ -949,6 +949,111 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_safety.py::"
               "test_a_module_ready_without_its_lock_loads_instead_of_failing",),
              "a module ready without its lock recompiles and fails on .c.cached"),
+    Mutation("shell-obstacle-no-offset", "fem_anim/contact/obstacles.py",
+             '{"normal": n, "point": p + offset * n}', '{"normal": n, "point": p}',
+             ("tests/test_shell_contact.py::test_sheet_dropped_on_the_ground_rests_at_the_offset",),
+             "a shell's mid-surface, not its face, kept off the ground (no t/2)"),
+    Mutation("shell-ipc-no-offset", "fem_anim/contact/ipc.py",
+             "        self.offset = float(offset)\n", "        self.offset = 0.0\n",
+             ("tests/test_shell_contact.py::"
+              "test_folded_strip_lands_on_itself_the_thickness_apart",),
+             "a shell's layers kept apart by d_hat only, not its thickness"),
+    Mutation("shell-ipc-boundary-only", "fem_anim/contact/contact_surface.py",
+             "    if is_shell(mesh):\n", "    if False:\n",
+             ("tests/test_shell_contact.py::"
+              "test_folded_strip_lands_on_itself_the_thickness_apart",),
+             "a shell's contact surface taken as its boundary edges, not its triangles"),
+    Mutation("crossing-adjacent-excluded-wrongly", "fem_anim/contact/intersection.py",
+             "        i, j = i[~shared], j[~shared]\n", "        i, j = i[shared], j[shared]\n",
+             ("tests/test_shell_contact.py::"
+              "test_crossing_pairs_finds_a_sheet_through_a_solid_and_through_itself",),
+             "the surface check tests only adjacent triangles"),
+    Mutation("crossing-barycentric", "fem_anim/contact/intersection.py",
+             "(beta + gamma <= 1 + eps)", "(beta + gamma <= 2 + eps)",
+             ("tests/test_shell_contact.py::"
+              "test_crossing_pairs_finds_a_sheet_through_a_solid_and_through_itself",),
+             "the crossing point tested against the parallelogram, not the triangle"),
+    Mutation("shell-obstacle-friction-off", "fem_anim/contact/obstacles.py",
+             "                 if not friction or ob[\"friction\"] > 0]",
+             "                 if not friction]",
+             ("tests/test_shell_contact.py::"
+              "test_sheet_sliding_on_the_ground_stops_at_coulomb_deceleration",),
+             "obstacle friction dropped"),
+    Mutation("crossing-sweep-short", "fem_anim/contact/intersection.py",
+             'hi[rows, 0].max(), side="right"', 'hi[rows, 0].min(), side="right"',
+             ("tests/test_shell_contact.py::test_crossing_pairs_sweep_equals_every_pair",),
+             "the sweep stops at the chunk's first x end: pairs further along are missed"),
+    Mutation("shell-rest-nearer-than-offset", "fem_anim/contact/ipc.py",
+             "compute_minimum_distance(self.mesh, x) <= self.offset:",
+             "compute_minimum_distance(self.mesh, x) < 0.0:",
+             ("tests/test_shell_contact.py::"
+              "test_a_shell_thicker_than_its_elements_apart_is_refused",),
+             "a shell whose elements are nearer than its thickness at rest is accepted"),
+    Mutation("render-shell-flat", "fem_anim/render/frames.py",
+             'return 3 if "shell" in scene else 2', "return 2",
+             ("tests/test_shell_contact.py::test_a_shell_run_is_drawn_in_3d",),
+             "a shell's triangles drawn as a 2D mesh (z dropped)"),
+    Mutation("shell-extent-least", "fem_anim/mesh/bodies.py",
+             "extent = float(spans.max() if shell else spans.min())",
+             "extent = float(spans.min())",
+             ("tests/test_demos.py::test_demo_runs[drape.py]",),
+             "contact.dhat compared with a flat sheet's zero thickness (every sheet refused)"),
+    Mutation("run-dim-from-cells", "fem_anim/runs.py",
+             'return int(scene["mesh"]["dim"])', "return self.cells.shape[1] - 1",
+             ("tests/test_shell_contact.py::"
+              "test_sheet_dropped_on_the_ground_rests_at_the_offset",),
+             "a shell run's points read back as 2D"),
+    Mutation("p2-surface-wrong-split", "fem_anim/contact/p2_surface.py",
+             "((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))",
+             "((a, ab, bc), (ab, b, bc), (ca, bc, c), (ab, bc, ca))",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_splits_each_facet_on_its_midpoint_dofs",),
+             "a P2 facet's first sub-triangle takes the wrong midpoint dof"),
+    Mutation("ipc-mixed-rows-unmapped", "fem_anim/contact/ipc.py",
+             "rows = np.asarray(u_dofs)[rows].astype(np.int64)",
+             "rows = rows.astype(np.int64)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_barrier_taylor_on_p2_and_mixed_unknowns[mixed-0.5]",),
+             "the barrier's gradient of a mixed unknown goes to V's dof numbers, not w's"),
+    Mutation("ipc-mixed-hessian-on-v-rows", "fem_anim/contact/ipc.py",
+             "return rows, (np.asarray(nodes, np.int64) * bs + rows % bs).reshape(-1, g)",
+             "return rows, (self.blocks[:, None] + V.dofmap.index_map.local_range[0]) * g "
+             "+ np.arange(g)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_barrier_taylor_on_p2_and_mixed_unknowns[mixed-0.5]",),
+             "the barrier's Hessian of a mixed unknown goes to V's global rows, not w's"),
+    Mutation("intersection-p2-corners-only", "fem_anim/contact/intersection.py",
+             "    if cells.shape[1] == 4:\n        return unique[counts == 1]",
+             "    if True:\n        return unique[counts == 1]",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_splits_each_facet_on_its_midpoint_dofs",),
+             "the independent check sees a P2 body's facets unsplit (its corners only)"),
+    Mutation("mixed-contact-start-as-u", "fem_anim/simulation/newton_start.py",
+             "p.load_guess(guess, p.x_work, apply_bcs=False)",
+             "p.u.x.array[:] = guess\n        u.copy(p.x_work)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_incompressible_body_dropped_on_another",),
+             "the collision-free start of a mixed step is copied as a displacement into w"),
+    Mutation("preview-one-step-on-contact", "fem_anim/scene/modes.py",
+             'if mode == "preview" and _has_contact(raw):',
+             "if False:",
+             ("tests/test_preview_contact.py::"
+              "test_preview_on_the_pile_does_not_fail_or_gain_energy",),
+             "the preview's one Newton step per step on a contact scene (the pile fails at "
+             "step 1)"),
+    Mutation("p2-surface-2d-unsplit", "fem_anim/contact/p2_surface.py",
+             "np.stack([m, corners[:, 1]], 1)], 1)",
+             "np.stack([corners[:, 0], corners[:, 1]], 1)], 1)",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_p2_surface_in_2d_splits_each_edge_at_its_midpoint_dof",),
+             "a 2D P2 boundary edge's second segment skips its midpoint dof"),
+    Mutation("mixed-contact-backtracking", "fem_anim/scene/modes.py",
+             "        _fill_petsc(solver, MIXED_CONTACT_PETSC)",
+             "        pass",
+             ("tests/test_p2_mixed_contact.py::"
+              "test_incompressible_drop_impact_steps_are_not_retried",),
+             "a mixed scene with contact keeps backtracking on ||r||^2, which fails at the "
+             "impact"),
 ]
 
 
