@@ -221,8 +221,11 @@ def test_memory_and_cost_are_reported():
 @pytest.mark.parametrize("change,message", [
     ({"param": ["material.mooney_ratio"]}, "not a parameter"),
     ({"param": ["initial.velocity"], "initial": None}, "no [initial] section"),
-    ({"obstacle": [{"type": "plane", "point": [0.0, 0.0, -1.0], "normal": [0.0, 0.0, 1.0]}]},
-     "not differentiable yet"),
+    ({"obstacle": [{"type": "plane", "point": [0.0, 0.0, -1.0], "normal": [0.0, 0.0, 1.0]}],
+      "time": {"steps": 2, "dt": 0.02, "integrator": "newmark"}}, "with contact"),
+    ({"param": ["body.left.material.density"]}, "no body 'left'"),
+    ({"param": ["region.soft.material.density"]}, "no region 'soft'"),
+    ({"param": ["damping.alpha"]}, "no [damping] section"),
     ({"time": {"steps": 2, "dt": 0.02, "integrator": "symplectic_euler"}},
      "not differentiable"),
 ])

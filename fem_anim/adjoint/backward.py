@@ -26,6 +26,16 @@ sweep is the transpose of exactly the forward code. Newmark's a_0 solves
 M a_0 = -grad E(0) - C v_0 (seed eq. 1b) and is differentiated the same way, with M in
 place of H.
 
+Contact (seed eq. 4's E holds it): an obstacle's barrier and lagged friction are UFL terms
+of g, so H holds their exact Hessian and, friction's pressure and normal being lagged at
+u_n = ``u_prev``, -d<R, lambda>/du_prev joins the adjoint of u_n (exact). IPC's barrier
+and friction live outside UFL: their unprojected Hessian (ipctk) times w is added to H,
+with each step's kappa as the forward recorded it (:class:`~fem_anim.adjoint.tape.Tape`;
+kappa and d_hat are constants of the step, the adaptive schedule is not differentiated);
+friction's dependence on u_n, through its slip x - x_n and through the normal forces and
+tangent bases lagged at x_n (ipctk's ``force_jacobian`` with respect to the lagged
+displacements), joins the adjoint of u_n: exact.
+
 Adjoint arrays are local dof arrays whose ghost entries equal their owners' (contributions
 are summed to the owners, then copied back to the ghosts), so the sweep is the same on any
 number of ranks.
@@ -85,7 +95,7 @@ class BackwardSweep:
 
     Args:
         problem: The :class:`~fem_anim.problem.objective.EnergyProblem` (displacement
-            formulation, no contact, no quadrature data).
+            formulation, no quadrature data).
         parameters: Its :class:`~fem_anim.adjoint.parameters.ParameterSet`.
         newmark: Whether a_0 is computed from the equations of motion (Newmark).
     """
@@ -106,8 +116,13 @@ class BackwardSweep:
                  "y": ufl.derivative(L, p.u_pred, dv)}
         if p.damped:
             forms["d"] = ufl.derivative(L, p.u_anchor, dv)
+        cell = ufl.TestFunction(p.W0)  # the derivative per cell (DG0)
         for name, f in coefficients.items():
-            forms[f"theta_{name}"] = ufl.derivative(L, f, parameters.one)
+            forms[f"theta_{name}"] = ufl.derivative(L, f, cell)
+        #: obstacle friction lags its pressure and normal at u_n = u_prev: R depends on u_n
+        self.lagged = p.contact is not None and p.contact.friction is not None
+        if self.lagged:
+            forms["prev"] = ufl.derivative(L, p.u_prev, dv)
         self.newmark = newmark
         if newmark:  # r0(a) = grad E(0) + C v_0 + M a = 0, and its action on mu
             self.a0 = fem.Function(V, name="initial_acceleration")
@@ -124,10 +139,13 @@ class BackwardSweep:
             L0 = ufl.action(ufl.replace(r0, rep), self.lam)
             forms["v0"] = ufl.derivative(L0, p.v, dv)
             for name, f in coefficients.items():
-                forms[f"theta0_{name}"] = ufl.derivative(L0, f, parameters.one)
+                forms[f"theta0_{name}"] = ufl.derivative(L0, f, cell)
             forms["mass"] = ufl.replace(p.rho * ufl.inner(du, dv) * p.dx_mass, rep)
         self.forms = compile_forms(forms)  # one FFCx module
         self.H = fem_petsc.create_matrix(self.forms["hessian"])
+        if p.ipc is not None:  # contact pairs couple dofs the elastic pattern does not
+            self.H.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        self.cell_work = fem.Function(p.W0, name="adjoint_cells")
         self.b = compat.petsc_vec(self.work).duplicate()
         self.x = self.b.duplicate()
         self.ksp = PETSc.KSP().create(p.comm)
@@ -161,9 +179,14 @@ class BackwardSweep:
         vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         return self.work.x.array.copy()
 
-    def scalar(self, name: str) -> float:
-        """A scalar form summed over all ranks."""
-        return self.problem.comm.allreduce(fem.assemble_scalar(self.forms[name]), op=MPI.SUM)
+    def cell_vector(self, name: str) -> np.ndarray:
+        """A DG0 vector form assembled: its owned entries (one per owned cell)."""
+        cells = compat.petsc_vec(self.cell_work)
+        with cells.localForm() as loc:
+            loc.set(0.0)
+        fem_petsc.assemble_vector(cells, self.forms[name])
+        cells.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        return cells.array.copy()
 
     def dot(self, a: np.ndarray, b: np.ndarray) -> float:
         """Sum of a * b over the owned dofs of all ranks."""
@@ -176,6 +199,13 @@ class BackwardSweep:
         start = time.perf_counter()
         self.H.zeroEntries()
         fem_petsc.assemble_matrix(self.H, self.forms[form], bcs=self.problem.displacement_bcs)
+        ipc = self.problem.ipc
+        if ipc is not None and form == "hessian":  # the barrier's (and friction's) exact one
+            self.H.assemble(PETSc.Mat.AssemblyType.FLUSH)
+            projection = ipc.projection
+            ipc.exact_hessian(True)
+            ipc.add_hessian(self.H, float(self.problem.weight.value))
+            ipc.projection = projection
         self.H.assemble()
         mid = time.perf_counter()
         rhs = rhs.copy()
@@ -190,15 +220,18 @@ class BackwardSweep:
         self.solve_s["solve"] += time.perf_counter() - mid
 
     def material_bar(self, prefix: str) -> dict[str, float]:
-        """-d<R, lambda>/dtheta for each material parameter, by the chain rule."""
-        partial = {name: self.scalar(f"{prefix}_{name}")
+        """-d<R, lambda>/dtheta for each material and damping parameter, by the chain rule
+        (the cell-wise derivatives summed over the parameter's cells and the ranks)."""
+        partial = {name: self.cell_vector(f"{prefix}_{name}")
                    for name in self.parameters.coefficients}
         out = {}
         for name in self.parameters.names:
             direction = self.parameters.material_direction(name)
             if direction is None:
                 continue
-            out[name] = -sum(factor * partial[c] for c, factor in direction.terms)
+            mask = self.parameters.cell_mask(direction.group)
+            local = sum(factor * float(partial[c][mask].sum()) for c, factor in direction.terms)
+            out[name] = -self.problem.comm.allreduce(local, op=MPI.SUM)
         return out
 
     # -- the sweep ----------------------------------------------------------------------
@@ -228,9 +261,7 @@ class BackwardSweep:
             y_bar = sum(U[o, "y"] * bar[o] for o in STATE_FIELDS)
             s_bar = {k: sum(U[o, k] * bar[o] for o in STATE_FIELDS) for k in maps["inputs"]}
             # the step's objective as the forward staged it, at its solution
-            u_pred = integ.predictor(h, start)
-            damping = integ.damping_anchor(h, start) if p.damped else None
-            p.stage(start.u, u_pred, integ.weight(h, start), start.time + h, h, damping)
+            self.stage(sim, tape, n)
             p.u.x.array[:] = end.u
             self.solve("hessian", x_bar)
             y_bar = y_bar - self.vector("y")
@@ -243,6 +274,10 @@ class BackwardSweep:
                 if d_bar is not None:
                     total = total + maps["D"][k] * d_bar
                 target[k] = target.get(k, zero) + total
+            if self.lagged:  # R's dependence on u_n through the lagged friction
+                target["u"] = target["u"] - self.vector("prev")
+            if p.ipc is not None and p.ipc.friction is not None:
+                target["u"] = target["u"] + self._ipc_friction_bar()
         v_bar = state_bars[0].get("v", zero)
         if self.newmark:
             v_bar = v_bar + self._initial_acceleration(tape.states[0], state_bars[0], grad)
@@ -251,6 +286,43 @@ class BackwardSweep:
             if basis is not None:
                 grad[name] += self.dot(v_bar, basis)
         return np.array([grad[name] for name in names])
+
+    def stage(self, sim, tape, n: int) -> None:
+        """Stage step n's objective as the forward did (collective): the predictor, weight,
+        damping anchor and pins from the state at its start, and IPC's recorded barrier
+        stiffness (the adaptive schedule is not re-run: kappa and d_hat are constants of
+        the step) with friction lagged at u_n."""
+        p, integ, h = self.problem, sim.integrator, tape.h
+        start = tape.states[n]
+        u_pred = integ.predictor(h, start)
+        damping = integ.damping_anchor(h, start) if p.damped else None
+        ipc, p.ipc = p.ipc, None
+        try:
+            p.stage(start.u, u_pred, integ.weight(h, start), start.time + h, h, damping)
+        finally:
+            p.ipc = ipc
+        if ipc is not None:
+            p.u.x.array[:] = start.u
+            ipc.weight = float(p.weight.value)
+            ipc.restage(tape.barrier_stiffness[n], h)
+
+    def _ipc_friction_bar(self) -> np.ndarray:
+        """-dR/du_n^T lambda of IPC's lagged friction (collective).
+
+        R holds w grad D(x; x_n) = -w F(x_n, v) with F ipctk's friction force, v = x - x_n
+        the slip and the normal forces and tangent bases taken at x_n, so
+        dR/du_n = -w (dF/dx_n - dF/dv) and
+
+            -dR/du_n^T lambda = w (dF/dx_n)^T lambda + w Hess D lambda
+
+        (``force_jacobian`` with respect to the lagged displacements, and the exact,
+        unprojected Hessian of D).
+        """
+        ipc = self.problem.ipc  # the pairs are distributed: fem_anim.contact.distribution
+        rows = ipc.friction_adjoint(self.lam.x.array, float(self.problem.weight.value))
+        local = np.zeros_like(self.lam.x.array)
+        local.reshape(-1, ipc.gdim)[: rows.shape[0]] = rows
+        return self.consistent(local)
 
     def _initial_acceleration(self, state: State, bar: dict, grad: dict) -> np.ndarray:
         """Back through M a_0 = -grad E(0) - C v_0: adds theta's part to ``grad`` and

@@ -10,15 +10,17 @@ states (:mod:`fem_anim.adjoint.tape`), evaluates the objective
 one-call form at the scene's own values.
 
 What is differentiated: implicit Euler, BDF2 and Newmark; the displacement formulation with
-one material whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...);
-gravity, Rayleigh damping, pins and moving handles. Refused with one line (a
-:class:`~fem_anim.errors.FemAnimError`): contact (obstacles, IPC), the mixed formulation,
-symplectic Euler, materials computing quadrature data outside UFL (corotated in 3D), regions and
-bodies.
+materials whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...), per
+region and per body; gravity, Rayleigh damping, pins and moving handles; with implicit
+Euler and BDF2 also obstacles and IPC contact, barrier and lagged friction, exactly
+(:mod:`fem_anim.adjoint.backward`; kappa and d_hat held fixed). Refused with one line (a
+:class:`~fem_anim.errors.FemAnimError`): Newmark with contact, the mixed formulation,
+symplectic Euler, materials computing quadrature data outside UFL (corotated in 3D).
 """
 
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -33,7 +35,7 @@ __all__ = ["ADJOINT_OPTIONS", "AdjointModel", "gradient"]
 
 #: The forward solver's tolerances while differentiating (below the command line's options):
 #: each step converged far below the derivative's accuracy.
-ADJOINT_OPTIONS = {"snes_rtol": "1e-12", "snes_atol": "1e-13"}
+ADJOINT_OPTIONS = {"snes_rtol": "1e-14", "snes_atol": "5e-13"}
 
 
 def check_differentiable(scene) -> None:
@@ -42,12 +44,10 @@ def check_differentiable(scene) -> None:
     Raises:
         FemAnimError: naming the scene feature.
     """
-    refused = [("obstacle", "obstacles"), ("contact", "IPC contact"), ("body", "[[body]]"),
-               ("region", "[[region]]")]
-    for key, what in refused:
-        if scene.get(key):
-            raise FemAnimError(f"gradient: scenes with {what} are not differentiable yet "
-                               "(contact and friction are outside the adjoint)")
+    contact = bool(scene.get("obstacle")) or "contact" in scene.data
+    if contact and scene["time"]["integrator"] == "newmark":
+        raise FemAnimError("gradient: time.integrator = \"newmark\" with contact (obstacles "
+                           "or [contact]) is not differentiable (implicit_euler or bdf2)")
     if scene["element"].get("formulation", "displacement") == "mixed":
         raise FemAnimError("gradient: element.formulation = \"mixed\" is not differentiable yet")
     if scene["time"]["integrator"] not in ("implicit_euler", "bdf2", "newmark"):
@@ -56,6 +56,44 @@ def check_differentiable(scene) -> None:
     if scene["solver"]["mode"] != "exact":
         raise FemAnimError("gradient: solver.mode must be \"exact\" (a preview step is not "
                            "converged, so it has no derivative)")
+
+
+def converged_scene(scene):
+    """The scene with contact's default IPC step test replaced by the residual norm test.
+
+    ``solver.stopping = "auto"`` stops a contact scene's Newton at IPC's step test, whose
+    residual is only small against the step's forces (:mod:`fem_anim.solver.stopping`); a
+    step's derivative holds at its stationary point, so the adjoint's forward steps are
+    converged by ||r|| to :data:`ADJOINT_OPTIONS`' tolerances (or to the round-off floor).
+
+    Returns:
+        The scene itself, or a copy with ``solver.stopping = "norm"``.
+    """
+    contact = bool(scene.get("obstacle")) or "contact" in scene.data
+    if not contact or scene["solver"]["stopping"] != "auto":
+        return scene
+    data = copy.deepcopy(scene.data)
+    data["solver"]["stopping"] = "norm"
+    return type(scene)._of(data, scene.source, scene.base_dir)
+
+
+def exact_near_minimiser(minimiser, problem) -> None:
+    """Let Newton switch IPC's Hessian from its per-pair projection to the exact one once
+    its steps are small (as the ``"step"`` test does), under the norm test too: with the
+    projection alone Newton converges only linearly near a resting contact and stalls at
+    the round-off floor above the norm test's tolerance.
+
+    Args:
+        minimiser: The simulation's :class:`~fem_anim.solver.minimiser.Minimiser`.
+        problem: Its :class:`~fem_anim.problem.objective.EnergyProblem` (with ``[contact]``).
+    """
+    from fem_anim.solver.stopping import scene_diagonal
+
+    x = problem.domain.mesh.geometry.x[:, : problem.domain.mesh.geometry.dim]
+    if not minimiser.step_tol:
+        minimiser.step_tol = float(problem.scene["solver"]["step_tol"]) * \
+            scene_diagonal(problem.comm, x)
+    minimiser._exact_near = True
 
 
 class AdjointModel:
@@ -77,9 +115,12 @@ class AdjointModel:
         from fem_anim.simulation.loop import Simulation
 
         check_differentiable(scene)
+        scene = converged_scene(scene)
         self.scene = scene
         self.sim = Simulation(scene, comm, cli_options=ADJOINT_OPTIONS | (cli_options or {}))
         self.problem = p = self.sim.problem
+        if p.ipc is not None:
+            exact_near_minimiser(self.sim.minimiser, p)
         if p.quadrature_data:
             raise FemAnimError(f"gradient: material.model = {scene['material']['model']!r} "
                                "computes quadrature data outside UFL; not differentiable yet")
@@ -90,7 +131,7 @@ class AdjointModel:
         self.tape: Tape | None = None
         #: Wall time (s) of the last evaluation's forward run and backward sweep.
         self.timing = {"forward": 0.0, "backward": 0.0}
-        self._bound: set[int] = set()
+        self._bound: list = []  # kept alive: an id is unique only while its object lives
 
     @property
     def names(self) -> list[str]:
@@ -130,9 +171,9 @@ class AdjointModel:
     def bind(self, objective) -> None:
         """Prepare an objective for this model, once (collective; raises its bad input,
         e.g. a target run on another mesh)."""
-        if id(objective) not in self._bound:
+        if not any(o is objective for o in self._bound):
             objective.bind(self)
-            self._bound.add(id(objective))
+            self._bound.append(objective)
 
 
 def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORLD,

@@ -23,13 +23,17 @@ __all__ = ["DEFAULT_BOUNDS", "FitResult", "default_bounds", "fit"]
 #: Bounds relative to the start (factor range) or absolute, per parameter kind.
 DEFAULT_BOUNDS = {"material.youngs_modulus": ("factor", 1e-3, 1e3),
                   "material.density": ("factor", 1e-3, 1e3),
-                  "material.poisson_ratio": ("absolute", -0.99, 0.499)}
+                  "material.poisson_ratio": ("absolute", -0.99, 0.499),
+                  "damping.alpha": ("absolute", 0.0, None),
+                  "damping.beta": ("absolute", 0.0, None)}
 
 
 def default_bounds(name: str, start: float) -> tuple[float | None, float | None]:
     """The bounds of a parameter without ``--bounds``: E and rho within a factor 1000 of
-    the start, nu in (-0.99, 0.499), velocities unbounded."""
-    kind = DEFAULT_BOUNDS.get(name)
+    the start, nu in (-0.99, 0.499) (a region's or body's too), damping coefficients
+    non-negative, velocities unbounded."""
+    kind = next((v for k, v in DEFAULT_BOUNDS.items() if name == k or
+                 name.endswith("." + k)), None)
     if kind is None:
         return None, None
     how, low, high = kind

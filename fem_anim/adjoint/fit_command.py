@@ -36,7 +36,10 @@ def build_fit_parser() -> OneLineParser:
                         help="a finished run on the same mesh whose trajectory is matched")
     parser.add_argument("--param", action="append", required=True, metavar="KEY",
                         help="a scene key to fit (material.youngs_modulus, "
-                        "material.poisson_ratio, material.density, initial.velocity)")
+                        "material.poisson_ratio, material.density, damping.alpha, "
+                        "damping.beta, initial.velocity; a body's or region's: "
+                        "body.NAME.material.youngs_modulus, region.NAME.material.density, "
+                        "body.NAME.initial.velocity, ...)")
     parser.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW,HIGH",
                         help="bounds of a parameter (default: E and rho within x1000 of the "
                         "start, nu in (-0.99, 0.499))")

@@ -5,8 +5,10 @@ with a fixed step h (seed section 3.1) from the rest shape with the parameters' 
 velocity, and keeps each :class:`~fem_anim.simulation.integrators.State` (u, v, a and
 BDF2's u_{n-1}, v_{n-1}: local dof arrays). That is all the backward sweep needs: it
 re-stages each step's objective from the state at its start and re-assembles the exact
-Hessian at the state at its end. The memory is :attr:`Tape.nbytes` (about 5 x 8 bytes per
-local dof and step; no checkpointing: for short runs).
+Hessian at the state at its end; with ``[contact]`` it also keeps each step's IPC barrier
+stiffness kappa (the adaptive schedule is restarted at every forward run, so the run is
+the same function of the parameters each time). The memory is :attr:`Tape.nbytes` (about
+5 x 8 bytes per local dof and step; no checkpointing: for short runs).
 
 A step whose Newton iteration did not converge to its test (kept at the iteration budget
 or at the round-off floor) has no defined derivative: :func:`record_forward` raises.
@@ -39,6 +41,8 @@ class Tape:
 
     h: float
     states: list[State] = field(default_factory=list)
+    #: IPC's barrier stiffness kappa of each step (Pa; empty without ``[contact]``)
+    barrier_stiffness: list[float] = field(default_factory=list)
     forward_s: float = 0.0
 
     @property
@@ -57,19 +61,14 @@ def start_state(sim, parameters) -> State:
     """The state at t = 0 with the parameters' initial velocity (collective).
 
     v_0 is the scene's rigid field with its translational part replaced by the parameters'
-    ``initial.velocity`` (v_0 is affine in it); Newmark's a_0 = M^-1 (f(0) - C v_0) is
-    computed from the current material (seed eq. 1b).
+    ``initial.velocity`` and each body's (v_0 is affine in them); Newmark's
+    a_0 = M^-1 (f(0) - C v_0) is computed from the current material (seed eq. 1b).
     """
     p = sim.problem
     n = p.u.x.array.size
     v0 = initial_velocity(sim.scene, p)
     v0 = np.zeros(n) if v0 is None else v0
-    init = sim.scene.get("initial") or {}
-    scene_v = np.zeros(p.d) if init.get("velocity") is None else \
-        np.asarray(init["velocity"], dtype=float)
-    for i in range(p.d):
-        basis = parameters.velocity_basis(f"initial.velocity[{i}]", p)
-        v0 = v0 + (parameters.velocity[i] - scene_v[i]) * basis
+    v0 = v0 + parameters.velocity_offset(p)
     p.v.x.array[:] = v0
     state = State(u=np.zeros(n), v=v0, a=np.zeros(n))
     if sim.integrator.name == "newmark":
@@ -97,8 +96,15 @@ def record_forward(sim, parameters, steps: int, h: float) -> Tape:
     tape = Tape(h=h)
     state = start_state(sim, parameters)
     tape.states.append(state)
+    ipc = sim.problem.ipc
+    if ipc is not None:  # IPC's adaptive stiffness schedule from its start, every run
+        ipc.restore({"kappa_floor": 0.0, "kappa_balanced": 0.0})
+        ipc.kappa = float(ipc.cfg["stiffness"]) if ipc.cfg["stiffness"] != "adaptive" else 0.0
+        ipc._distance = np.inf
     for _ in range(steps):
         state, stats = sim.step(state, h)
+        if ipc is not None:
+            tape.barrier_stiffness.append(float(ipc.kappa))
         if stats.reason not in CONVERGED_REASONS:
             raise ConvergenceError(
                 f"step {state.step} (t = {state.time:.6g} s) stopped without converging "

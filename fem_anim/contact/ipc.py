@@ -355,6 +355,39 @@ class IPCContact:
                            rowmap=unique.astype(PETSc.IntType))
         self.timers["barrier_s"] += time.perf_counter() - start
 
+    def friction_adjoint(self, lam: np.ndarray, w: float) -> np.ndarray:
+        """w (Hess D + (dF/dx_n)^T) lambda on the owned dof blocks (collective).
+
+        The adjoint of IPC's lagged friction (:mod:`fem_anim.adjoint.backward`): D's exact,
+        unprojected Hessian and ipctk's ``force_jacobian`` with respect to the lagged
+        displacements, on the pairs this rank owns (its friction mesh), summed at the owners.
+
+        Args:
+            lam: A local dof array of ``V`` (the adjoint variable).
+            w: The integrator weight.
+
+        Returns:
+            (owned blocks, gdim) rows, zero off the free surface dofs.
+        """
+        x = self._update()
+        halo, g = self._friction_halo, self.gdim
+        lam = halo.exchange.fetch(lam.reshape(-1, g)[: self.n_owned]).ravel()
+        free = halo.free
+        lam = lam * free
+        rest = halo.mesh.rest_positions
+        slip = self._friction_positions(x) - self._x_lagged
+        Hd = self.friction.hessian(self.tangential, halo.mesh, slip,
+                                   ipctk.PSDProjectionMethod.NONE)
+        normal = ipctk.BarrierPotential(self.dhat, self.kappa, True)
+        Jl = self.friction.force_jacobian(
+            self.tangential, halo.mesh, np.asfortranarray(rest),
+            np.asfortranarray(self._x_lagged - rest), np.asfortranarray(slip), normal,
+            ipctk.TangentialPotential.DiffWRT.LAGGED_DISPLACEMENTS)
+        out = Hd @ lam + Jl.T @ lam
+        owned = np.zeros((self.n_owned, g))
+        halo.to_owners((w * out * free).reshape(-1, g), owned)
+        return owned
+
     # -- admissibility ----------------------------------------------------------------------
     def step_bound(self, y: np.ndarray) -> float:
         """The largest collision-free step along the update ``-y`` (collective).

@@ -12,6 +12,14 @@ Each body's surface has its own vertex numbering (the mesh vertices its faces us
 mesh order), so a body exports as one self-contained mesh; ``vertices`` maps it back to
 the run's vertices, and ``owner`` names the cell behind each face (its energy density is
 the face's).
+
+A P2 body (seed section 4.2) deforms its faces into curved quadratic patches; its vertex
+values alone draw the flat triangle of the corners. :func:`refine_p2` splits each boundary
+triangle (a, b, c) into four, (a, ab, ca), (ab, b, bc), (ca, bc, c) and (ab, bc, ca), through
+the midpoints of its edges, where the P2 field has its edge dofs: every vertex of the refined
+surface carries a dof of the solution, so its positions are the P2 field's exact values
+there (the trajectory's ``displacement_dofs``, :mod:`fem_anim.output.trajectory`). The four
+children keep their parent's winding and owner cell.
 """
 
 from __future__ import annotations
@@ -20,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BodySurface", "boundary_faces", "body_surfaces"]
+__all__ = ["BodySurface", "boundary_faces", "body_surfaces", "refine_p2"]
 
 #: The faces of a tetrahedron (a, b, c, d): face k is opposite vertex k.
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
@@ -94,3 +102,45 @@ def body_surfaces(points: np.ndarray, cells: np.ndarray, body: np.ndarray) -> li
         used, local = np.unique(faces[mine], return_inverse=True)
         surfaces.append(BodySurface(k, used, local.reshape(-1, 3), owner[mine]))
     return surfaces
+
+
+def refine_p2(surfaces: list[BodySurface], nodes: np.ndarray,
+              num_points: int) -> list[BodySurface]:
+    """Each surface's triangles split in four through their edges' P2 dofs.
+
+    Args:
+        surfaces: The bodies' surfaces (:func:`body_surfaces`), numbered in run vertices.
+        nodes: The ``(i, j)`` run vertex pair of each row of the P2 field, ``(n, 2)``
+            (vertex rows ``i == j``, edge rows ``i < j``;
+            :class:`~fem_anim.output.dof_gather.DofGather`).
+        num_points: The run's number of vertices.
+
+    Returns:
+        The refined surfaces, whose ``vertices`` are rows of ``nodes`` (not run vertices).
+
+    Raises:
+        ValueError: an edge of a boundary triangle has no row in ``nodes`` (not a P2 field).
+    """
+    nodes = np.asarray(nodes, dtype=np.int64)
+    code = nodes[:, 0] * num_points + nodes[:, 1]
+    order = np.argsort(code)
+
+    def row(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        key = np.minimum(i, j) * num_points + np.maximum(i, j)
+        at = np.minimum(np.searchsorted(code, key, sorter=order), code.size - 1)
+        found = order[at]
+        if not np.array_equal(code[found], key):
+            raise ValueError("a boundary edge has no dof in the field: not a P2 field")
+        return found
+
+    out = []
+    for surface in surfaces:
+        a, b, c = surface.vertices[surface.triangles].T
+        va, vb, vc = row(a, a), row(b, b), row(c, c)
+        ab, bc, ca = row(a, b), row(b, c), row(c, a)
+        children = np.stack([np.stack(t, axis=1) for t in (
+            (va, ab, ca), (ab, vb, bc), (ca, bc, vc), (ab, bc, ca))], axis=1).reshape(-1, 3)
+        used, local = np.unique(children, return_inverse=True)
+        out.append(BodySurface(surface.body, used, local.reshape(-1, 3),
+                               np.repeat(surface.owner, 4)))
+    return out

@@ -1,7 +1,8 @@
 """A run as mesh sequences: one OBJ or PLY file per body per frame.
 
 Each body's boundary surface (:mod:`fem_anim.export.boundary`, triangles wound
-counter-clockwise seen from outside) is written at every frame as
+counter-clockwise seen from outside; a P2 body's refined through its edge dofs) is written
+at every frame as
 ``<body>_<frame>.<obj|ply>``, the frame number ``start_frame + k`` zero-padded to at least
 four digits (Blender's and Houdini's sequence importers count the files by that number).
 The writers are plain numpy: OBJ as text (``o <body>``, ``v`` lines to nine significant
@@ -15,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.export.boundary import body_surfaces
 from fem_anim.export.run_reader import RunData
 
 __all__ = ["FORMATS", "write_obj", "write_ply", "sequence_files", "write_sequence"]
@@ -93,10 +93,10 @@ def write_sequence(run: RunData, folder: Path, fmt: str, names: list[str],
     Returns:
         The names of the files written.
     """
-    surfaces = body_surfaces(run.points, run.cells, run.body)
+    surfaces, rest = run.surfaces(), run.surface_points()
     files = sequence_files(run, names, fmt, start_frame)
     for k, row in enumerate(files):
-        x = run.positions(k)
+        x = rest + run.surface_displacement(k)
         for surface, name, file in zip(surfaces, names, row):
             if fmt == "obj":
                 write_obj(folder / file, name, x[surface.vertices], surface.triangles)

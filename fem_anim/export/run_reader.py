@@ -2,7 +2,9 @@
 
 A run directory (:mod:`fem_anim.output.rundir`) holds ``trajectory.h5`` (rest points,
 cells, each frame's vertex displacements and cell energy densities, the cells' body
-numbers) and ``scene.json`` (the validated scene: its name, bodies, obstacles, gravity).
+numbers and, for a P2 body, every dof of its displacement: ``displacement_nodes`` and
+``displacement_dofs{k}``, :mod:`fem_anim.output.trajectory`) and ``scene.json`` (the
+validated scene: its name, bodies, obstacles, gravity).
 :func:`read_run` gathers them into a :class:`RunData`; the exporters take that and nothing
 else, so a finished run and a run's staging area (read before it is installed) export
 the same way.
@@ -17,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.errors import FemAnimError
+from fem_anim.export.boundary import BodySurface, body_surfaces, refine_p2
 
 __all__ = ["RunData", "read_run"]
 
@@ -36,6 +39,8 @@ class RunData:
         gravity: The gravity vector (zero when the scene has none), ``(dim,)``.
         obstacles: The scene's ``[[obstacle]]`` tables.
         path: The folder the run was read from.
+        nodes: The ``(i, j)`` vertex pair of each row of the displacement's dofs when the
+            trajectory holds them with edge rows (a P2 body), else None.
     """
 
     name: str
@@ -48,6 +53,7 @@ class RunData:
     gravity: np.ndarray
     obstacles: list[dict] = field(default_factory=list)
     path: Path | None = None
+    nodes: np.ndarray | None = None
 
     def displacement(self, frame: int) -> np.ndarray:
         """Vertex displacements of one frame ``(v, 3)`` (m)."""
@@ -60,6 +66,30 @@ class RunData:
     def energy_density(self, frame: int) -> np.ndarray:
         """Each cell's mean energy density of one frame ``(m,)`` (J/m^3)."""
         return self._dataset(f"energy_density{frame}")
+
+    def surfaces(self) -> list[BodySurface]:
+        """Each body's outward boundary surface (:mod:`fem_anim.export.boundary`); for a P2
+        body refined through its edge dofs (:func:`~fem_anim.export.boundary.refine_p2`),
+        its ``vertices`` then rows of :meth:`surface_points`."""
+        surfaces = body_surfaces(self.points, self.cells, self.body)
+        if self.nodes is None:
+            return surfaces
+        return refine_p2(surfaces, self.nodes, self.points.shape[0])
+
+    def surface_points(self) -> np.ndarray:
+        """Rest positions of the rows :meth:`surfaces` numbers ``(n, 3)`` (m): the
+        vertices, and for a P2 body also its edge midpoints."""
+        if self.nodes is None:
+            return self.points
+        return 0.5 * (self.points[self.nodes[:, 0]] + self.points[self.nodes[:, 1]])
+
+    def surface_displacement(self, frame: int) -> np.ndarray:
+        """The displacement at :meth:`surface_points` of one frame ``(n, 3)`` (m): the P2
+        field's dof values where the trajectory holds them."""
+        if self.nodes is None:
+            return self.displacement(frame)
+        u = self._dataset(f"displacement_dofs{frame}")
+        return np.hstack([u, np.zeros((u.shape[0], 3 - u.shape[1]))])
 
     def _dataset(self, name: str) -> np.ndarray:
         import h5py
@@ -99,6 +129,8 @@ def read_run(path: Path) -> RunData:
             times = np.asarray(h5.attrs["times"], dtype=float)
             body = np.asarray(h5["body"], dtype=np.int64) if "body" in h5 else \
                 cell_components(cells, points.shape[0]).astype(np.int64)
+            nodes = np.asarray(h5["displacement_nodes"], dtype=np.int64) \
+                if "displacement_nodes" in h5 else None
     except (OSError, ValueError, KeyError, TypeError) as err:
         raise FemAnimError(f"the run in {path} cannot be read: {err}") from None
     bodies = scene.get("body") or []
@@ -109,5 +141,7 @@ def read_run(path: Path) -> RunData:
     if int(body.max()) + 1 != len(names):
         raise FemAnimError(f"the run in {path} has {int(body.max()) + 1} bodies in its mesh "
                            f"but {len(names)} in its scene")
+    if nodes is not None and np.all(nodes[:, 0] == nodes[:, 1]):
+        nodes = None  # vertex dofs only (P1): the vertex displacement is all of it
     return RunData(scene.get("name", "scene"), points, cells, body, names, times, dim,
-                   gravity, list(scene.get("obstacle") or []), path)
+                   gravity, list(scene.get("obstacle") or []), path, nodes)

@@ -4,7 +4,8 @@ The stage (Pixar's ``usd-core``, module ``pxr``) has one ``Xform`` root ``/<scen
 default prim) holding
 
 * ``/<scene>/<body>``: a ``UsdGeom.Mesh`` per body, named after the body
-  (:func:`prim_names`): its boundary surface (:mod:`fem_anim.export.boundary`), triangles
+  (:func:`prim_names`): its boundary surface (:mod:`fem_anim.export.boundary`; a P2 body's
+  refined through its edge dofs, each face split in four), triangles
   wound counter-clockwise seen from outside (``orientation = rightHanded``, no subdivision),
   ``points`` and ``extent`` sampled at every frame, and the primvars ``displacement``
   (|u| per vertex, m), ``energy_density`` (per face: the mean psi of the cell behind it,
@@ -30,7 +31,6 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.errors import FemAnimError
-from fem_anim.export.boundary import body_surfaces
 from fem_anim.export.run_reader import RunData, read_run
 
 __all__ = ["write_usd", "export_staged_run", "frame_rate", "time_codes", "prim_names",
@@ -163,7 +163,7 @@ def write_usd(run: RunData, path: Path, start_frame: int = 1) -> None:
                            else UsdGeom.Tokens.z)
     root = "/" + Tf.MakeValidIdentifier(run.name)
     stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, root).GetPrim())
-    surfaces = body_surfaces(run.points, run.cells, run.body)
+    surfaces, rest = run.surfaces(), run.surface_points()
     meshes = []
     for surface, name in zip(surfaces, prim_names(run.body_names)):
         mesh = UsdGeom.Mesh.Define(stage, f"{root}/{name}")
@@ -182,8 +182,8 @@ def write_usd(run: RunData, path: Path, start_frame: int = 1) -> None:
                                               UsdGeom.Tokens.uniform)))
     low, high = np.full(3, np.inf), np.full(3, -np.inf)
     for k, code in enumerate(codes):
-        u = run.displacement(k)
-        x = run.points + u
+        u = run.surface_displacement(k)
+        x = rest + u
         psi = run.energy_density(k)
         time = Usd.TimeCode(float(code))
         for mesh, surface, displacement, energy in meshes:

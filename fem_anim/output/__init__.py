@@ -2,8 +2,10 @@
 
 :mod:`~fem_anim.output.files` gathers displacements and cell values to rank 0 in input order
 and writes ``stats.csv``, ``final.vtu`` and ``scene.json`` through a staging area;
-:mod:`~fem_anim.output.trajectory` writes the trajectory (XDMF + HDF5) so that a kill at any
-moment leaves it continuable; :mod:`~fem_anim.output.rundir` marks, locks and installs a run
+:mod:`~fem_anim.output.dof_gather` does it for every dof of a P1
+or P2 field (the trajectory's ``output.fields``); :mod:`~fem_anim.output.trajectory` writes
+the trajectory (XDMF + HDF5) so that a kill at any moment leaves it continuable;
+:mod:`~fem_anim.output.rundir` marks, locks and installs a run
 directory so fem_anim only ever replaces files it wrote, and
 :mod:`~fem_anim.output.products` keeps that promise for every other command writing into
 a folder a user names; :mod:`~fem_anim.output.provenance`
@@ -15,6 +17,7 @@ from fem_anim.lazy_exports import lazy_exports
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "CellGather": "files",
+    "DofGather": "dof_gather",
     "RENDER_PRODUCTS": "rundir",
     "RunDirectory": "files",
     "STATS_COLUMNS": "files",

@@ -5,14 +5,22 @@ frame k's vertex displacements, ``energy_density{k}`` its cells' mean psi, attri
 ``times``), so meshio's TimeSeriesReader and ParaView read it, plus ``body``, each cell's body
 number (0-based, in ``[[body]]`` order), given to every frame as cell data ``body``.
 
+``output.fields`` adds every dof of a field, not only its vertex values
+(:class:`~fem_anim.output.dof_gather.DofGather`'s rank-independent rows):
+``{name}_dofs{k}`` (frame k) with ``{name}_nodes`` (the input vertex pair ``(i, j)`` of each
+row: a vertex when ``i == j``, else the midpoint of edge ``(i, j)``), for ``velocity``,
+``pressure`` (a mixed run) and, for a P2 body, ``displacement`` (its edge dofs; seed
+section 4.2). With them a step's discrete equations (seed eq. 4) can be re-assembled from
+the file. They are HDF5 datasets only: XDMF has no P2 field on the P1 mesh.
+
 While the run is in progress every file is written whole or not at all, so a kill at any
 moment (SIGKILL included, in the middle of a frame) leaves a trajectory a resumed run can
 continue:
 
 * ``trajectory.h5`` holds the mesh and its cells' ``body`` only (written once, atomically);
 * each frame k is its own small HDF5 file ``trajectory.frames/frame{k:06d}.h5``
-  (``displacement``, ``energy_density``, attribute ``time``), built in memory and written
-  atomically (temp file, fsync, rename);
+  (``displacement``, ``energy_density``, ``{name}_dofs`` of ``output.fields``, attribute
+  ``time``), built in memory and written atomically (temp file, fsync, rename);
 * ``trajectory.xdmf`` is rewritten atomically after each frame and lists the complete
   frames, reading each from its file.
 
@@ -63,6 +71,9 @@ class TrajectoryWriter:
         domain: The mesh (its input points and cells are written once).
         keep_frames: None for a new trajectory; for a resumed run, the number of frames
             to keep (later ones are dropped).
+        nodes: (rank 0) For each field written at all its dofs (``output.fields``), the
+            ``(i, j)`` input vertex pairs of its rows (:attr:`DofGather.nodes
+            <fem_anim.output.dof_gather.DofGather>`).
 
     Raises:
         OSError: (rank 0) naming the file, if a resumed trajectory's ``.h5`` cannot be
@@ -71,8 +82,10 @@ class TrajectoryWriter:
 
     CELL_TYPES = {3: ("triangle", "Triangle"), 4: ("tetra", "Tetrahedron")}
 
-    def __init__(self, path: Path, domain: SimplexMesh, keep_frames: int | None = None):
+    def __init__(self, path: Path, domain: SimplexMesh, keep_frames: int | None = None,
+                 nodes: dict[str, np.ndarray] | None = None):
         self.rank0 = domain.mesh.comm.rank == 0
+        self.nodes = dict(nodes or {})
         self.path = Path(path)
         self.h5_path = self.path.with_suffix(".h5")
         self.frames = self.path.with_name(FRAMES_FOLDER.format(stem=self.path.stem))
@@ -91,8 +104,9 @@ class TrajectoryWriter:
         self._sync()
 
     def _write_mesh(self) -> None:
-        write_atomically(self.h5_path, _h5_image({"data0": self.points, "data1": self.cells,
-                                                  "body": body_numbers(self.cells)}, {}))
+        write_atomically(self.h5_path, _h5_image(
+            {"data0": self.points, "data1": self.cells, "body": body_numbers(self.cells)}
+            | {f"{name}_nodes": n for name, n in self.nodes.items()}, {}))
 
     def frame_file(self, k: int) -> Path:
         """The staged file of frame ``k`` (0-based)."""
@@ -105,49 +119,67 @@ class TrajectoryWriter:
         try:
             with h5py.File(self.h5_path, "r") as h5:
                 self.frames.mkdir(exist_ok=True)
-                has_body = "body" in h5  # not in a run begun before cells had their body
                 merged = np.asarray(h5.attrs.get("times", np.zeros(0)))
                 for k in range(keep):
                     if not self.frame_file(k).is_file() and k < merged.size \
                             and f"data{k + 2}" in h5:  # merged before the kill
                         self._write_frame(k, float(merged[k]), h5[f"data{k + 2}"][()],
-                                          h5[f"energy_density{k}"][()])
+                                          h5[f"energy_density{k}"][()],
+                                          {name: h5[f"{name}_dofs{k}"][()]
+                                           for name in self.nodes
+                                           if f"{name}_dofs{k}" in h5})
         except (OSError, KeyError) as err:  # h5py reports damage as OSError / KeyError
             raise OSError(getattr(err, "errno", 0) or 0, f"cannot be read ({err}); the run "
                           "cannot be continued from it", str(self.h5_path)) from None
-        if not has_body:  # every kept frame is in its own file now: the mesh file is free
-            self._write_mesh()
         for k in range(keep):
             try:
                 with h5py.File(self.frame_file(k), "r") as f:
                     self.times.append(float(f.attrs["time"]))
+                    missing = [name for name in self.nodes if f"{name}_dofs" not in f]
             except (OSError, KeyError) as err:
                 raise OSError(getattr(err, "errno", 0) or 0,
                               f"holds {k} readable frames where the checkpoint expects {keep} "
                               f"({err}; the run cannot be continued from it)",
                               str(self.frame_file(k))) from None
+            if missing:  # a run begun with other output.fields
+                raise OSError(0, f"has no {', '.join(missing)} field, which output.fields "
+                              "lists now: continue with the output.fields the run began "
+                              "with", str(self.frame_file(k)))
+        # every kept frame is in its own file now: the mesh file is free (and gets the cells'
+        # body and the fields' nodes if a run begun before they were written lacks them)
+        self._write_mesh()
         for stale in self.frames.iterdir():  # frames after the checkpoint, cut-short writes
             if stale.name.startswith(".") or stale.name > self.frame_file(keep - 1).name:
                 stale.unlink()
 
     def _write_frame(self, k: int, time: float, displacement: np.ndarray,
-                     energy_density: np.ndarray) -> None:
+                     energy_density: np.ndarray, dofs: dict[str, np.ndarray]) -> None:
         write_atomically(self.frame_file(k), _h5_image(
-            {"displacement": _pad3(displacement), "energy_density": energy_density},
+            {"displacement": _pad3(displacement), "energy_density": energy_density}
+            | {f"{name}_dofs": values for name, values in dofs.items()},
             {"time": time}))
 
     def write(self, time: float, displacement: np.ndarray | None,
-              energy_density: np.ndarray | None) -> None:
+              energy_density: np.ndarray | None,
+              dofs: dict[str, np.ndarray] | None = None) -> None:
         """Append a frame (rank 0 writes; other ranks pass None).
 
         Args:
             time: The frame's time (s).
             displacement: Vertex displacements (num_points, gdim) in input order.
             energy_density: Each cell's mean energy density (num_cells,) in input order.
+            dofs: Every dof of each field of ``nodes`` (rows in its nodes' order).
+
+        Raises:
+            ValueError: ``dofs`` does not hold exactly the fields of ``nodes``.
         """
         if not self.rank0:
             return
-        self._write_frame(len(self.times), time, displacement, energy_density)
+        dofs = dict(dofs or {})
+        if set(dofs) != set(self.nodes):
+            raise ValueError(f"frame fields {sorted(dofs)} are not the trajectory's "
+                             f"{sorted(self.nodes)}")
+        self._write_frame(len(self.times), time, displacement, energy_density, dofs)
         self.times.append(time)
         self._sync()
 
@@ -168,10 +200,14 @@ class TrajectoryWriter:
                 out.create_dataset("data0", data=self.points)
                 out.create_dataset("data1", data=self.cells)
                 out.create_dataset("body", data=body_numbers(self.cells))
+                for name, nodes in self.nodes.items():
+                    out.create_dataset(f"{name}_nodes", data=nodes)
                 for k in range(len(self.times)):
                     with h5py.File(self.frame_file(k), "r") as f:
                         out.create_dataset(f"energy_density{k}", data=f["energy_density"][()])
                         out.create_dataset(f"data{k + 2}", data=f["displacement"][()])
+                        for name in self.nodes:
+                            out.create_dataset(f"{name}_dofs{k}", data=f[f"{name}_dofs"][()])
                 out.attrs["times"] = np.asarray(self.times)
             with open(tmp, "rb") as f:
                 os.fsync(f.fileno())

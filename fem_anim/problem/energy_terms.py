@@ -359,8 +359,11 @@ class EnergyTerms:
         and the term does no work; for nu < 1/2 it would put the volumetric stiffness, which
         the pressure carries, back into the displacement block.
         """
-        cfg = self.scene["damping"]
+        if not hasattr(self, "damping_alpha"):  # Constants: the adjoint differentiates them
+            cfg, mesh = self.scene["damping"], self.domain.mesh
+            self.damping_alpha = fem.Constant(mesh, PETSc.ScalarType(float(cfg["alpha"])))
+            self.damping_beta = fem.Constant(mesh, PETSc.ScalarType(float(cfg["beta"])))
         lmbda = -2.0 / self.d * self.mu if self.mixed else self.lmbda
         return damping_forms.dissipation_potential(
-            u, anchor, coefficient, float(cfg["alpha"]), float(cfg["beta"]), self.rho, self.mu,
+            u, anchor, coefficient, self.damping_alpha, self.damping_beta, self.rho, self.mu,
             lmbda, self.dx_mass, self.dx_elastic)

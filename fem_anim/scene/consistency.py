@@ -42,6 +42,9 @@ def _check_formulation(data: dict[str, Any]) -> None:
     Taylor-Hood space of :mod:`fem_anim.problem.mixed_space`)."""
     mat, element, solver = data["material"], data["element"], data["solver"]
     mixed = element["formulation"] == "mixed"
+    if not mixed and "pressure" in data["output"]["fields"]:
+        raise SceneError("output.fields lists \"pressure\", which only element.formulation = "
+                         "\"mixed\" has (the displacement formulation has no pressure unknown)")
     if not mixed:
         if mat["poisson_ratio"] == 0.5:
             raise SceneError("material.poisson_ratio must be in (-1.0, 0.5) with element."

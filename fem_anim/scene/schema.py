@@ -26,7 +26,8 @@ __all__ = ["Key", "KeyInfo", "SCHEMA", "DEFAULTS", "SECTIONS", "OPTIONAL_SECTION
            "ARRAY_SECTIONS", "BODY_TABLES", "BODY_ARRAYS", "REQUIRED", "NUM", "scene_keys",
            "type_text", "MATERIAL_MODELS", "FORMULATIONS", "INTEGRATORS", "MESH_SHAPES",
            "HESSIAN_UPDATES", "NONLINEAR_METHODS", "OBSTACLE_TYPES", "COLOR_FIELDS", "VIEWS",
-           "CAMERA_MODES", "RENDER_OUTPUTS", "SURFACE_FILLS", "LENGTH_UNITS"]
+           "CAMERA_MODES", "RENDER_OUTPUTS", "TRAJECTORY_FIELDS", "SURFACE_FILLS",
+           "LENGTH_UNITS"]
 
 MATERIAL_MODELS = ("linear", "stvk", "corotated", "neohookean", "stable_neohookean",
                    "corotated_lagged", "mooney_rivlin")
@@ -49,6 +50,8 @@ COLOR_FIELDS = ("displacement", "energy_density", "body")
 VIEWS = ("auto", "side", "iso", "xy", "xz", "yz")
 #: What ``render.camera`` may name (:mod:`fem_anim.render.camera`).
 CAMERA_MODES = ("fit_bodies", "follow", "fixed")
+#: What ``output.fields`` may list (:mod:`fem_anim.output.trajectory`).
+TRAJECTORY_FIELDS = ("displacement", "energy_density", "velocity", "pressure")
 #: What ``render.outputs`` may list: PNG frames, an animated GIF, an MP4 video.
 RENDER_OUTPUTS = ("frames", "gif", "mp4")
 
@@ -284,6 +287,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "start_frame": Key(int, 1, c.non_negative, doc="the number of frame 0 (the initial "
                            "state) in USD time codes and file names"),
         "every": Key(int, 1, c.at_least_one, unit="frames", doc="write every n-th frame"),
+        "fields": Key(list, ["displacement", "energy_density"],
+                      c.distinct_names(TRAJECTORY_FIELDS),
+                      doc="the trajectory's fields per frame: displacement and energy_density "
+                      "always (a P2 body's displacement at every dof), velocity and a mixed "
+                      "run's pressure at every dof when listed"),
         "checkpoint_every": Key(int, None, c.at_least_one, unit="frames",
                                 doc="frames between checkpoints (default steps/10)"),
         "render": Key(bool, True, doc="render the run's pictures when it ends"),

@@ -1,8 +1,8 @@
 """The time loop (seed section 3.1): the simulation of a scene and its step (``loop``), the
 integrators' predictors and updates (``integrators``), the initial state (``initial_state``),
 each step's start (``newton_start``), adaptive retries (``adaptive``), the frame loop and its
-files (``run_loop``), checkpoints and resume, interrupts, the progress bar and the energy
-report.
+files (``run_loop``), checkpoints and resume, interrupts, the progress bar, the handles'
+work per step (``handle_work``) and the energy report.
 """
 
 from fem_anim.lazy_exports import lazy_exports
@@ -12,6 +12,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "load_checkpoint": "checkpoint",
     "save_checkpoint": "checkpoint",
     "scene_hash": "checkpoint",
+    "AT_REST": "energy_report",
     "DAMPED_THRESHOLD": "energy_report",
     "ROUNDOFF_STRAIN": "energy_report",
     "describe_energy": "energy_report",
@@ -19,6 +20,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "initial_energies": "energy_report",
     "moving_pins": "energy_report",
     "write_summary": "energy_report",
+    "handle_work": "handle_work",
     "center_of_mass": "initial_state",
     "initial_velocity": "initial_state",
     "rigid_velocity": "initial_state",

@@ -20,10 +20,19 @@ Newmark and contact: the trapezoidal update applies the barrier force of a step'
 half of the next step, after the contact has released, and gains energy at impacts; scenes
 with contact are refused Newmark (:mod:`fem_anim.scene.contact_integrator`).
 
-A scene with moving pins is not given a relative figure: the handles put energy in, and the
-line gives the total energy before and after and what is stored at the end (kinetic,
-elastic, gravity, barrier). A dissipative scene (damping, friction) gets its drift and the
-largest rise above the initial energy, which it should never have.
+The balance. The stored energy E = T + Psi + V_gravity + barrier (``total_energy`` of
+``stats.csv``) changes by what the handles put in, W = sum of the steps' ``handle_work``
+(:mod:`fem_anim.simulation.handle_work`), less what damping, friction and the time step
+took: D = E_0 + W - E_end (``dissipated``), which must not be negative. A scene with
+moving pins is given no relative drift (the handles put energy in): its line gives the
+stored energy before and after, W and D; it is flagged when D < 0 by more than
+:data:`DAMPED_THRESHOLD` of the energy moved (the exchanged energy or the handles' work,
+whichever is larger). A dissipative scene (damping, friction) gets the stored energy
+before and after, D, and the largest rise above the initial energy, which it should never
+have. A scene with contact whose bodies end at rest (kinetic energy below 1 % of the
+exchanged energy) lost its motion at the impacts, as the implicit integrators that contact
+allows do: that is said, not flagged. Every figure is recomputable from ``stats.csv``
+(``total_energy``, ``kinetic``, ``handle_work``) and ``summary.json``'s ``initial_energy``.
 """
 
 from __future__ import annotations
@@ -38,11 +47,14 @@ from fem_anim.mesh.checks import cell_volumes
 from fem_anim.problem.shell_terms import shell_thickness
 
 __all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
-           "DAMPED_THRESHOLD", "ROUNDOFF_STRAIN", "moving_pins"]
+           "DAMPED_THRESHOLD", "ROUNDOFF_STRAIN", "AT_REST", "moving_pins"]
 
 #: A run that lost (gained) more than this fraction of the exchanged energy is flagged
 #: as damped (as gaining energy).
 DAMPED_THRESHOLD = 0.05
+#: A run whose last kinetic energy is below this fraction of the exchanged energy ended at
+#: rest.
+AT_REST = 0.01
 #: Energies below E_Young * volume * ROUNDOFF_STRAIN^2 are the solver's round-off, not
 #: motion: no relative figure is computed from them (a body at rest has no "drift").
 ROUNDOFF_STRAIN = 1.0e-6
@@ -91,8 +103,17 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
         level), ``max_excursion`` (relative, or None), ``conservative`` (whether the
         scene conserves energy: no damping, friction or moving pin), ``damped`` (a
         conservative scene that lost more than :data:`DAMPED_THRESHOLD` of the exchanged
-        energy), ``gained`` (a scene without moving pins that gained as much: damping and
-        friction only dissipate) and ``flagged`` (either).
+        energy and did not come to rest at contact), ``gained`` (a scene without moving
+        pins that gained as much: damping and friction only dissipate; with moving pins,
+        a negative ``dissipated`` beyond that fraction of the energy moved) and
+        ``flagged`` (either). The balance: ``initial_stored_energy`` and
+        ``stored_energy`` (kinetic, elastic, gravity, barrier at the start and the end),
+        ``handle_work`` (W, the sum of the rows' ``handle_work``; 0 without moving pins,
+        None for rows without it), ``dissipated`` (D = E_0 + W - E_end, taken by
+        damping, friction and the time step; None when W is), ``dissipated_by`` (which
+        of them the scene has), ``came_to_rest`` (a scene
+        with contact whose last kinetic energy is below :data:`AT_REST` of the exchanged
+        energy).
         ``unconverged_steps`` lists the steps kept at the round-off floor of the objective
         without meeting their stopping test (``snes_reason`` =
         :data:`fem_anim.solver.stopping.POLISH_FAILED_REASON`); ``budget_steps`` those accepted
@@ -104,28 +125,48 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
 
     e0 = initial["total_energy"]
     potential0 = initial["elastic"] + initial["gravity"]
+    moving = moving_pins(scene)
     exchanged = max([abs(e0)] + [r["kinetic"] for r in rows]
                     + [potential0 - r["elastic"] - r["gravity"] for r in rows])
     friction = any(ob["friction"] > 0 for ob in scene["obstacle"]) or \
         ("contact" in scene.data and scene["contact"]["friction"] > 0)
-    moving = moving_pins(scene)
     conservative = not scene.damped and not friction and not moving and \
         "wind" not in scene.data  # a shell's drag dissipates
     e_end = rows[-1]["total_energy"] if rows else e0
+    # the handles' work; None for rows without it (a run begun before it was recorded)
+    works = [r.get("handle_work") for r in rows]
+    work = float(sum(works)) if all(isinstance(w, (int, float)) for w in works) else None
+    if not moving:
+        work = 0.0  # pins that do not move do no work
+    dissipated = None if work is None else e0 + work - e_end
+    moved = max(exchanged, sum(abs(w) for w in works)) if moving and work is not None \
+        else exchanged
+    at_rest = bool(rows) and rows[-1]["kinetic"] <= AT_REST * exchanged
     drift = excursion = None
     if exchanged > initial.get("roundoff", 0.0):
         drift = (e_end - e0) / exchanged
         excursion = max(abs(r["total_energy"] - e0) for r in rows) / exchanged if rows else 0.0
     rise = max([0.0] + [r["total_energy"] - e0 for r in rows]) / exchanged \
         if drift is not None else None
-    damped = conservative and drift is not None and drift < -DAMPED_THRESHOLD
-    # damping and friction only take energy away: a gain is flagged for them too (not for a
-    # blowing [wind], which works on the body)
     blowing = "wind" in scene.data and any(scene["wind"]["velocity"])
+    came_to_rest = _contact(scene) and at_rest  # impacts took the motion, by design
+    damped = conservative and drift is not None and drift < -DAMPED_THRESHOLD and \
+        not came_to_rest
+    # damping and friction only take energy away: a gain is flagged for them too (not for a
+    # blowing [wind], which works on the body), and with handles when the stored energy rose
+    # by more than their work
     gained = not moving and drift is not None and drift > DAMPED_THRESHOLD and not blowing
+    if moving and dissipated is not None and moved > initial.get("roundoff", 0.0) and \
+            not blowing:
+        gained = dissipated < -DAMPED_THRESHOLD * moved
     return {"initial_energy": e0, "final_energy": e_end, "exchanged_energy": exchanged,
             "drift": drift, "max_excursion": excursion, "max_rise": rise,
             "moving_pins": moving, "stored_energy": _stored(rows[-1] if rows else initial),
+            "initial_stored_energy": _stored(initial), "handle_work": work,
+            "dissipated": dissipated, "came_to_rest": came_to_rest,
+            "dissipated_by": ["damping"] * scene.damped + ["friction"] * friction +
+            ["the wind's drag"] * ("wind" in scene.data) +
+            [f"{scene['time']['integrator']}'s step"],
             "conservative": conservative,
             "damped": damped, "gained": gained, "flagged": damped or gained,
             "unconverged_steps": [int(r["step"]) for r in rows
@@ -137,6 +178,26 @@ def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:
 def _stored(row: dict) -> dict[str, float]:
     """The energy held at the end: kinetic, elastic, gravity and the barriers' (J)."""
     return {k: float(row.get(k) or 0.0) for k in ("kinetic", "elastic", "gravity", "contact")}
+
+
+def _held(report: dict) -> str:
+    """``E_0 J -> E_end J (what is held at the end)``."""
+    stored = report.get("stored_energy") or {}
+    held = ", ".join(f"{'barrier' if k == 'contact' else k} {v:.4g}"
+                     for k, v in stored.items() if v)
+    return (f"{report['initial_energy']:.4g} J -> {report['final_energy']:.4g} J "
+            f"({held or 'none'} J)")
+
+
+def _took(report: dict, integrator: str) -> str:
+    """What the handles put in and what damping, friction and the step took (J)."""
+    work, dissipated = report.get("handle_work"), report.get("dissipated")
+    if dissipated is None:  # rows without the handles' work
+        return f"{report['initial_energy'] - report['final_energy']:.4g} J less in store"
+    line = f"handles did {work:+.4g} J of work; " if report.get("moving_pins") else ""
+    by = report.get("dissipated_by") or [f"{integrator}'s step"]
+    by = " and ".join([", ".join(by[:-1]), by[-1]] if len(by) > 1 else by)
+    return line + f"{by} took {dissipated:.4g} J"
 
 
 def _contact(scene) -> bool:
@@ -160,19 +221,22 @@ def describe_energy(report: dict, scene) -> str:
         return (f"no energy exchanged above round-off ({report['exchanged_energy']:.3g} J): "
                 f"the body stayed at rest{unmet}")
     pct = 100.0 * report["drift"]
+    took = _took(report, integrator)
     if report.get("moving_pins"):  # handles put energy in: a % of the motion means nothing
-        stored = report.get("stored_energy") or {}
-        held = ", ".join(f"{k} {v:.4g}" for k, v in stored.items() if v)
-        return (f"handles worked on the bodies: total energy {report['initial_energy']:.4g} J "
-                f"-> {report['final_energy']:.4g} J, the handles' work less what damping and "
-                f"friction took (not conserved by design); stored at the end: "
-                f"{held or 'none'} J{unmet}")
+        line = (f"handles worked on the bodies: stored energy {_held(report)}; "
+                f"{took}")
+        if report["gained"]:
+            return (line + "; energy GAINED beyond the handles' work, not conserved by the "
+                    f"scheme: use a smaller time.dt{unmet}")
+        return line + f" (not conserved by design){unmet}"
+    if report.get("came_to_rest") and not report["gained"]:
+        return (f"the bodies came to rest: stored energy {_held(report)}; {took}, as "
+                f"designed (an implicit step damps the motion at impacts){unmet}")
     if not report["conservative"] and not report["gained"]:
         rise = report.get("max_rise") or 0.0
-        return (f"energy drift {pct:+.3g} % of the exchanged energy "
-                f"({report['exchanged_energy']:.4g} J): taken by damping, friction, drag and "
-                f"{integrator}'s step (given by a wind), as designed; at most {100.0 * rise:.3g} % above its "
-                f"start{unmet}")
+        return (f"stored energy {_held(report)}; {took}, as designed; "
+                f"at most {100.0 * rise:.3g} % of the exchanged energy "
+                f"({report['exchanged_energy']:.4g} J) above its start{unmet}")
     base = (f"energy drift {pct:+.3g} % of the exchanged energy "
             f"({report['exchanged_energy']:.4g} J), max excursion "
             f"{100.0 * report['max_excursion']:.3g} %{unmet}")

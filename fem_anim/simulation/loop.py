@@ -30,12 +30,15 @@ from fem_anim import compat
 from fem_anim.errors import ConvergenceError, FemAnimError
 from fem_anim.mesh.bodies import build_scene_mesh
 from fem_anim.mesh.simplex import SimplexMesh
+from fem_anim.output.dof_gather import DofGather
 from fem_anim.output.files import CellGather, VertexGather
 from fem_anim.output.provenance import WallClock
 from fem_anim.petsc_options import flatten_options, merge_options
 from fem_anim.problem.form_compiler import JIT_OPTIONS
 from fem_anim.problem.objective import EnergyProblem
 from fem_anim.scene.consistency import MIXED_PRESETS
+from fem_anim.simulation.energy_report import moving_pins
+from fem_anim.simulation.handle_work import handle_work
 from fem_anim.simulation.initial_state import initial_velocity
 from fem_anim.simulation.integrators import Integrator, State
 from fem_anim.simulation.newton_start import initial_guess
@@ -127,6 +130,9 @@ class Simulation:
         self.minimiser.require_read(cli_options or {})
         self.gather = VertexGather(self.domain, self.problem.V)
         self.cell_gather = CellGather(self.domain)
+        self._handles = moving_pins(scene)  # stats' handle_work needs computing
+        #: The fields the trajectory holds at every dof (``output.fields``), by name.
+        self.dof_gathers = self._dof_gathers()
         self.clock.add("compile", self.problem.compile_s)
         self.clock.add("setup", time.perf_counter() - start - self.clock.seconds["mesh"]
                        - self.problem.compile_s)
@@ -266,6 +272,30 @@ class Simulation:
         return (self.gather.gather(state.u),
                 self.cell_gather.gather(self.problem.cell_energy_density(state.u)))
 
+    def _dof_gathers(self) -> dict[str, DofGather]:
+        """A P2 body's displacement, and the listed velocity and pressure (collective)."""
+        p, fields = self.problem, self.scene["output"]["fields"]
+        out = {}
+        if self.scene["element"]["degree"] > 1 or "velocity" in fields:
+            gather = DofGather(self.domain, p.V)
+            if self.scene["element"]["degree"] > 1:
+                out["displacement"] = gather
+            if "velocity" in fields:
+                out["velocity"] = gather
+        if "pressure" in fields:
+            out["pressure"] = DofGather(self.domain, p.fields.Q)
+        return out
+
+    def frame_dofs(self, state: State) -> dict[str, np.ndarray | None]:
+        """Every dof of the fields of :attr:`dof_gathers` on rank 0 (None elsewhere;
+        collective): displacement (m), velocity (m/s) and pressure p = mu p~ (Pa; the
+        mixed unknown's p~ = p / mu, :mod:`fem_anim.problem.mixed_space`), as the last
+        step left it."""
+        p = self.problem
+        values = {"displacement": lambda: state.u, "velocity": lambda: state.v,
+                  "pressure": lambda: float(p.mu.value) * p.p.x.array}
+        return {name: g.gather(values[name]()) for name, g in self.dof_gathers.items()}
+
     def timed_step(self, state: State, dt: float) -> tuple[State, dict]:
         """:meth:`step`, its energies and its stats row (a ``stats.csv`` row; collective).
 
@@ -275,6 +305,8 @@ class Simulation:
         start = time.perf_counter()
         self._contact_stats(row=False)  # this step's contact time only (not failed tries')
         new, solve = self.step(state, dt)
+        work = handle_work(self.problem, state.u, self.problem.x_work) if self._handles \
+            else 0.0
         energies = self.problem.energies()
         self._check_finite(new, energies)
         wall = time.perf_counter() - start
@@ -288,6 +320,7 @@ class Simulation:
             "hessian_assemblies": solve.hessian_assemblies,
             "factorisations": solve.factorisations,
             **{f"{kind}_its": count for kind, count in solve.hessian_its.items()}, **energies,
+            "handle_work": work,
             "assembly_s": solve.assembly_s,
             "factor_s": solve.factor_s, "linear_solve_s": solve.linear_solve_s,
             "other_s": wall - solve.assembly_s - solve.factor_s - solve.linear_solve_s,

@@ -4,7 +4,9 @@ frames at k / ``output.fps`` up to ``time.steps * time.dt`` (the frame clock,
 ``time.dt`` (:class:`~fem_anim.simulation.adaptive.AdaptiveStepper`), with the run's files.
 
 Per frame it writes the stats rows and, every ``output.every`` frames, the trajectory
-frame (displacement and cell energy density), and every ``output.checkpoint_every`` frames
+frame (displacement and cell energy density, and every dof of the fields
+``output.fields`` asks for: :meth:`Simulation.frame_dofs
+<fem_anim.simulation.loop.Simulation.frame_dofs>`), and every ``output.checkpoint_every`` frames
 a checkpoint (:mod:`fem_anim.simulation.checkpoint`); at the end the final state and the
 scene. Every file operation is collective: rank 0 writes, an OS error becomes one message
 naming the file, raised on every rank.
@@ -170,7 +172,8 @@ def _loop(sim, clock: FrameClock, every, run_dir, quiet, resume, interrupts) -> 
     stats_file = trajectory = None
     if run_dir:  # the trajectory first: a resume it refuses leaves stats.csv as it was
         trajectory = _io(sim, run_dir.file("trajectory.h5"), TrajectoryWriter,
-                         run_dir.file("trajectory.xdmf"), sim.domain, kept)
+                         run_dir.file("trajectory.xdmf"), sim.domain, kept,
+                         {name: g.nodes for name, g in sim.dof_gathers.items()})
         stats_file = _io(sim, run_dir.file("stats.csv"), StatsWriter,
                          run_dir.file("stats.csv"), sim.comm, rows)
 
@@ -189,7 +192,8 @@ def _loop(sim, clock: FrameClock, every, run_dir, quiet, resume, interrupts) -> 
     progress.update(0, advance=first - 1)
     try:
         if trajectory and not resume:
-            _io(sim, trajectory.h5_path, trajectory.write, 0.0, *sim.frame_fields(state))
+            _io(sim, trajectory.h5_path, trajectory.write, 0.0, *sim.frame_fields(state),
+                sim.frame_dofs(state))
         for frame in range(first, steps + 1):
             for state, row in stepper.advance(state, clock.time(frame)):
                 rows.append(row)
@@ -198,7 +202,7 @@ def _loop(sim, clock: FrameClock, every, run_dir, quiet, resume, interrupts) -> 
             state = _on_frame(state, clock, frame)
             if trajectory and (frame % every == 0 or frame == steps):
                 _io(sim, trajectory.h5_path, trajectory.write, state.time,
-                    *sim.frame_fields(state))
+                    *sim.frame_fields(state), sim.frame_dofs(state))
             saved = run_dir and frame % checkpoint_every == 0 and frame < steps
             if saved:
                 checkpoint(frame)

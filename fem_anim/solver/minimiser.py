@@ -372,7 +372,8 @@ class Minimiser:
         """
         replaced = self.hessian.descent_direction(x, y, self.b)  # auto with CG
         self.stop.decrements.append(np.nan if self.saddle else 0.5 * abs(self.b.dot(y)))
-        if self.stop.stopping == "step":  # the full step, before any bound shortens it
+        # the full step, before any bound shortens it (also read by the exact-Hessian switch)
+        if self.stop.stopping == "step" or self._exact_near:
             self.stop.steps.append(y.norm(PETSc.NormType.INFINITY))
         scaled = bound_step(self.problem, x, y) < 1.0 or replaced
         if self.problem.filter_inversion:
