@@ -221,20 +221,20 @@ def describe_energy(report: dict, scene) -> str:
         return (f"no energy exchanged above round-off ({report['exchanged_energy']:.3g} J): "
                 f"the body stayed at rest{unmet}")
     pct = 100.0 * report["drift"]
-    took = _took(report, integrator)
     if report.get("moving_pins"):  # handles put energy in: a % of the motion means nothing
         line = (f"handles worked on the bodies: stored energy {_held(report)}; "
-                f"{took}")
+                f"{_took(report, integrator)}")
         if report["gained"]:
             return (line + "; energy GAINED beyond the handles' work, not conserved by the "
                     f"scheme: use a smaller time.dt{unmet}")
         return line + f" (not conserved by design){unmet}"
     if report.get("came_to_rest") and not report["gained"]:
-        return (f"the bodies came to rest: stored energy {_held(report)}; {took}, as "
-                f"designed (an implicit step damps the motion at impacts){unmet}")
+        return (f"the bodies came to rest: stored energy {_held(report)}; "
+                f"{_took(report, integrator)}, as designed (an implicit step damps the motion "
+                f"at impacts){unmet}")
     if not report["conservative"] and not report["gained"]:
         rise = report.get("max_rise") or 0.0
-        return (f"stored energy {_held(report)}; {took}, as designed; "
+        return (f"stored energy {_held(report)}; {_took(report, integrator)}, as designed; "
                 f"at most {100.0 * rise:.3g} % of the exchanged energy "
                 f"({report['exchanged_energy']:.4g} J) above its start{unmet}")
     base = (f"energy drift {pct:+.3g} % of the exchanged energy "
