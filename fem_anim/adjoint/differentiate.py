@@ -94,6 +94,10 @@ def exact_near_minimiser(minimiser, problem) -> None:
         minimiser.step_tol = float(problem.scene["solver"]["step_tol"]) * \
             scene_diagonal(problem.comm, x)
     minimiser._exact_near = True
+    # from the test's size itself, not EXACT_NEAR times it: under the adjoint's tight norm
+    # test an exact direction taken that far out failed on the IPC cubes with BDF2, and the
+    # projected Newton then stalled above the tolerance (tests/test_adjoint_contact.py)
+    minimiser.exact_near_start = 1.0
 
 
 class AdjointModel:

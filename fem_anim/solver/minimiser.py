@@ -134,6 +134,8 @@ class Minimiser:
             self.stop.forces = problem.force_scale
         #: ``"step"`` with IPC: the barrier's exact Hessian once a step is small (below)
         self._exact_near = stopping == "step" and getattr(problem, "ipc", None) is not None
+        #: where the exact barrier Hessian first takes over, x the test's size
+        self.exact_near_start = EXACT_NEAR
         self._exact_ok = False
         if not self.saddle:
             snes.setObjective(self.objective)
@@ -234,7 +236,7 @@ class Minimiser:
         self.stop.start()
         self.stop.step_scale = self.step_tol * getattr(self.problem, "step_size", 0.0)
         self._exact_ok = self._exact_near
-        self._near = EXACT_NEAR  # x the test's size: where the exact Hessian takes over
+        self._near = self.exact_near_start  # x the test's size: the exact Hessian from here
         self._exact_on = False
         if self._exact_near:
             self.problem.ipc.exact_hessian(False)
