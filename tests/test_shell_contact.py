@@ -272,6 +272,21 @@ def test_a_shell_thicker_than_its_elements_apart_is_refused(tmp_path):
     assert len(err) == 1 and "not more than its thickness" in err[0], err
 
 
+def test_two_layers_farther_apart_than_the_thickness_are_accepted(tmp_path):
+    """A strip folded into a U whose legs are 2.5 mm apart (t = 2 mm, d_hat = 1 mm: within
+    the contact's reach at rest, but farther apart than the offset) runs. The rest check
+    compares a distance with the thickness: ipctk's minimum distance is a squared one
+    (6.25e-6 m^2 here, below t), and comparing that with t refused these legs."""
+    _u_fold(tmp_path / "fold.obj", 0.1, 0.0025)
+    scene = _scene(time={"dt": 0.01, "steps": 2})
+    scene["mesh"] = {"shape": "file", "file": str(tmp_path / "fold.obj")}
+    scene["material"]["mass"] = "consistent"
+    del scene["obstacle"]
+    scene["contact"] = {"dhat": DHAT}
+    points, cells, frames, _ = _frames(scene, tmp_path / "layers")
+    assert len(frames) == 3 and crossed_frames(points, cells, frames) == []
+
+
 def test_a_shell_run_is_drawn_in_3d(tmp_path):
     """The renderer reads a shell run's triangles as a surface in 3D (its scene.json has
     [shell]); a 2D solid's triangles stay 2D."""

@@ -589,7 +589,7 @@ class IPCContact:
                 return (f"at rest, bodies {names[a]!r} and {names[b]!r} intersect; move them "
                         "apart (body offset)")
             return "at rest, the bodies' surfaces intersect (a mesh crosses itself)"
-        d = self._min_distance(x)
+        d = np.sqrt(self._min_distance(x))  # ipctk's is d^2
         if self.offset > 0 and np.isfinite(d) and d <= self.offset:
             return (f"at rest, two non-adjacent elements of a shell are {d:.3g} m apart, not "
                     f"more than its thickness {self.offset} m (the contact offset); make the "

@@ -1194,6 +1194,13 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint_contact.py::"
               "test_contact_gradient_equals_central_differences[ipc-bdf2]",),
              "the adjoint's forward takes the exact barrier Hessian 100x out and stalls"),
+    Mutation("shell-rest-squared-distance", "fem_anim/contact/ipc.py",
+             "        d = np.sqrt(self._min_distance(x))  # ipctk's is d^2\n"
+             "        if self.offset > 0",
+             "        d = self._min_distance(x)\n        if self.offset > 0",
+             ("tests/test_shell_contact.py::"
+              "test_two_layers_farther_apart_than_the_thickness_are_accepted",),
+             "the shell rest check compares ipctk's squared distance with the thickness"),
 ]
 
 
