@@ -1110,7 +1110,8 @@ MUTATIONS: list[Mutation] = [
               "test_two_region_assembly_matches_reference[3-groups-and-box-three-models]",),
              "corotated's stretch trace computed on the other materials' cells instead"),
     Mutation("min-distance-squared", "fem_anim/contact/ipc.py",
-             "d = np.sqrt(self._min_distance(x))", "d = (self._min_distance(x))",
+             "d = np.sqrt(self._min_distance(x))  # ipctk's is d^2\n        return {",
+             "d = (self._min_distance(x))\n        return {",
              ("tests/test_newton_pace.py::"
               "test_min_distance_is_the_smallest_pair_distance_in_metres",),
              "stats.csv's min_distance is ipctk's squared distance (m^2 shown as m)"),
