@@ -183,6 +183,50 @@ def test_staged_products_leave_nothing_when_a_write_fails(tmp_path):
     assert read_manifest(folder) == {"a.csv"}
 
 
+@pytest.mark.parametrize("where", ["this thread", "another thread"])
+def test_a_signal_during_the_install_comes_after_it(tmp_path, monkeypatch, where):
+    """SIGINT while the products are being renamed into place (seen under load: the render
+    had staged everything when the signal came) is delivered once all of them are: the new
+    files are complete, the manifest lists them, no staging folder stays, and the folder is
+    named by installed_before_a_signal. Delivered to another thread (VTK's or a BLAS pool's,
+    which the main thread's mask does not cover), Python runs the handler in the main thread
+    at once: the install must still not be cut in half."""
+    import threading
+
+    from fem_anim.output import products, rundir
+
+    folder = tmp_path / "d"
+    folder.mkdir()
+    write_manifest(folder, {"a.csv", "b.csv"})
+    for name in ("a.csv", "b.csv"):
+        (folder / name).write_text("old")
+    other = threading.Thread(target=threading.Event().wait, args=(5.0,), daemon=True)
+    other.start()
+    real_install = rundir.install
+
+    def install_signalled(staging, target, replaces=()):
+        if where == "this thread":
+            os.kill(os.getpid(), signal.SIGINT)
+        else:
+            signal.pthread_kill(other.ident, signal.SIGINT)
+        time.sleep(0.05)  # the handler has had its chance to run
+        for name in ("a.csv", "b.csv"):  # one rename at a time, Python between them
+            time.sleep(0.01)
+            assert (staging / name).exists()
+        return real_install(staging, target, replaces=replaces)
+
+    monkeypatch.setattr(products, "install", install_signalled)
+    with pytest.raises(KeyboardInterrupt):
+        with staged_products(folder, ["a.csv", "b.csv"]) as staging:
+            for name in ("a.csv", "b.csv"):
+                (staging / name).write_text("new")
+    assert {n: (folder / n).read_text() for n in ("a.csv", "b.csv")} == \
+        {"a.csv": "new", "b.csv": "new"}
+    assert read_manifest(folder) == {"a.csv", "b.csv"}
+    assert not any(name.startswith(STAGING_PREFIX) for name in os.listdir(folder))
+    assert folder in products.installed_before_a_signal()
+
+
 # -- render ----------------------------------------------------------------------------------
 @pytest.mark.parametrize("name", ["animation.gif", "final.png", "energies.png",
                                   "frames/frame_0000.png"])
@@ -281,8 +325,16 @@ def test_signal_while_rendering_leaves_the_old_pictures(tmp_path, sig):
         deadline = time.time() + 60
         while list(out.glob(f"{STAGING_PREFIX}*")) and time.time() < deadline:
             time.sleep(0.05)
-    assert tree(out) == before  # no frame, no GIF, no staging folder
+    after = tree(out)
+    assert not any(name.startswith(STAGING_PREFIX) for name in os.listdir(out))
     assert not (out / "frames").exists()
+    if sig == signal.SIGINT and "new pictures were installed" in stderr:
+        # the signal came while the finished pictures were renamed into place (it is held
+        # then): all of them are new, and listed
+        assert "animation.gif" in read_manifest(out) and "animation.gif" in after
+        assert after["final.png"] != before["final.png"]
+    else:
+        assert after == before  # no frame, no GIF, no staging folder
 
 
 # -- bench -----------------------------------------------------------------------------------

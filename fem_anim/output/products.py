@@ -15,7 +15,10 @@ an exporter) uses this module:
   manifest (:func:`fem_anim.output.rundir.install`, which checks ownership once more),
   with SIGINT, SIGTERM and SIGHUP held meanwhile so that all are installed or none. An
   error or an interrupt removes the staging folder: no half-written file ever sits under
-  a product's name, and the previous products stay as they were;
+  a product's name, and the previous products stay as they were. A signal that arrives
+  while the files are being installed is delivered once they all are
+  (:func:`installed_before_a_signal` then names the folder, so the command can say that its
+  new files are complete rather than "nothing was installed");
 * :func:`write_product`: one file (``-o FILE.md``) the same way.
 
 A file of the manifest that the command may write but did not write this time (a plot of
@@ -36,10 +39,21 @@ from pathlib import Path
 from fem_anim.errors import FemAnimError
 from fem_anim.output.rundir import MARKER, foreign_files, install, read_manifest
 
-__all__ = ["check_may_write", "staged_products", "write_product", "STAGING_PREFIX"]
+__all__ = ["check_may_write", "staged_products", "write_product", "installed_before_a_signal",
+           "STAGING_PREFIX"]
 
 #: Prefix of the staging folders (hidden, unique per command; removed when it ends).
 STAGING_PREFIX = ".fem_anim-staging-"
+#: The stop signals held while a product set is installed.
+HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+_installed_before_signal: list[Path] = []
+
+
+def installed_before_a_signal() -> list[Path]:
+    """The folders of this process whose new products were installed completely although a
+    stop signal arrived during the install (it was delivered right after it)."""
+    return list(_installed_before_signal)
 
 
 def check_may_write(folder: Path, names: Iterable[str], comm=None) -> None:
@@ -108,24 +122,46 @@ def staged_products(folder: Path, names: Iterable[str],
             raise FemAnimError(f"internal error: {sorted(made - names)} written into {folder} "
                                f"but not declared (declared: {sorted(names)})")
         old = names & read_manifest(folder) if replaces is None else set(replaces)
-        with _signals_held():  # all files renamed and listed, or none
+        with _signals_held(folder):  # all files renamed and listed, or none
             install(staging, folder, replaces=old)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
 
 @contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
-    """Hold SIGINT, SIGTERM and SIGHUP (delivered when the block ends), main thread only."""
-    held = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+def _signals_held(folder: Path) -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP until the block ends (main thread only).
+
+    Two layers: the main thread's signal mask, and Python handlers that only note the
+    signal, because another thread of the process (VTK's, a BLAS pool's) may take the
+    signal, and Python then runs the handler in the main thread at once, inside the block.
+    When the block ends, the handlers and the mask are restored and the first signal noted
+    (or left pending by the mask) is raised again, so the command's own handler sees it
+    after the block: after a completed install, the folder is then listed by
+    :func:`installed_before_a_signal`.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    arrived: list[int] = []
+    handlers = {sig: signal.getsignal(sig) for sig in HELD_SIGNALS}
+    for sig in HELD_SIGNALS:
+        signal.signal(sig, lambda signum, frame: arrived.append(signum))
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_SIGNALS)
+    completed = False
     try:
         yield
+        completed = True
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+        for sig in sorted(signal.sigpending() & set(HELD_SIGNALS)):
+            arrived.append(signal.sigwait({sig}))  # taken while still blocked
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        for sig, handler in handlers.items():  # None: a handler not set from Python
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+        if arrived:
+            if completed:
+                _installed_before_signal.append(Path(folder))
+            signal.raise_signal(arrived[0])
 
 
 def write_product(path: Path, data: bytes) -> None:

@@ -25,6 +25,7 @@ import sys
 from pathlib import Path
 
 from fem_anim.errors import FemAnimError, Interrupted, describe_os_error
+from fem_anim.output.products import installed_before_a_signal
 from fem_anim.render.animation import render_directory
 from fem_anim.render.frames import render_vtu
 
@@ -32,6 +33,17 @@ __all__ = ["render_file", "render_run", "STOP_SIGNALS"]
 
 #: Signals that stop a rendering: it removes its staged files and installs nothing.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: What the renderer says when a signal came while its finished pictures were installed.
+INSTALLED_THEN_STOPPED = ("rendering interrupted after its new pictures were installed; "
+                          "they are complete")
+
+
+def _interrupted(stderr: str, signum: int) -> Interrupted:
+    """The parent's account of an interrupted renderer, true to what the renderer did."""
+    if INSTALLED_THEN_STOPPED in stderr:
+        return Interrupted(INSTALLED_THEN_STOPPED, signum)
+    return Interrupted(f"rendering interrupted by signal {signum}; nothing was installed, "
+                       "the previous pictures are as they were", signum)
 
 
 def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
@@ -54,12 +66,12 @@ def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
     except KeyboardInterrupt:
         child.send_signal(signal.SIGINT)  # let it clean up (it may have had one already)
         try:
-            child.communicate(timeout=60)
+            _, stderr = child.communicate(timeout=60)
         except subprocess.TimeoutExpired:
             child.kill()
             child.wait()
-        raise Interrupted("rendering interrupted; nothing was installed, the previous "
-                          "pictures are as they were", signal.SIGINT) from None
+            stderr = ""
+        raise _interrupted(stderr or "", signal.SIGINT) from None
     proc = subprocess.CompletedProcess(child.args, child.returncode, stdout, stderr)
     message = proc.stderr.strip()
     last = message.splitlines()[-1] if message else ""  # after ffmpeg's own complaints
@@ -67,8 +79,7 @@ def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
         raise FemAnimError(last.removeprefix("fem-anim: error: "))
     if proc.returncode < 0 or proc.returncode - 128 in STOP_SIGNALS:
         signum = -proc.returncode if proc.returncode < 0 else proc.returncode - 128
-        raise Interrupted(f"rendering stopped by signal {signum}; the previous pictures "
-                          "are as they were", signum)
+        raise _interrupted(message, signum)
     if proc.returncode != 0:
         last = message.splitlines()[-1] if message else f"exit code {proc.returncode}"
         raise RuntimeError(f"rendering failed: {last}")
@@ -158,8 +169,11 @@ def main(argv: list[str] | None = None) -> int:
               f"{describe_os_error(err, target)}; nothing was replaced", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("fem-anim: error: rendering interrupted; nothing was installed",
-              file=sys.stderr)
+        if args.run and Path(args.run) in installed_before_a_signal():
+            print(f"fem-anim: error: {INSTALLED_THEN_STOPPED}", file=sys.stderr)
+        else:
+            print("fem-anim: error: rendering interrupted; nothing was installed",
+                  file=sys.stderr)
         return 128 + stopped.get("signum", signal.SIGINT)
     return 0
 

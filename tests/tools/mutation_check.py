@@ -1202,6 +1202,19 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_contact.py::"
               "test_two_layers_farther_apart_than_the_thickness_are_accepted",),
              "the shell rest check compares ipctk's squared distance with the thickness"),
+    Mutation("install-signal-not-deferred", "fem_anim/output/products.py",
+             "        signal.signal(sig, lambda signum, frame: arrived.append(signum))\n",
+             "        pass\n",
+             ("tests/test_command_safety.py::test_a_signal_during_the_install_comes_after_it",),
+             "a signal taken by another thread interrupts the install half way"),
+    Mutation("install-signal-lost", "fem_anim/output/products.py",
+             "            signal.raise_signal(arrived[0])", "            pass",
+             ("tests/test_command_safety.py::test_a_signal_during_the_install_comes_after_it",),
+             "a signal that came during the install is swallowed"),
+    Mutation("install-signal-not-recorded", "fem_anim/output/products.py",
+             "                _installed_before_signal.append(Path(folder))", "                pass",
+             ("tests/test_command_safety.py::test_a_signal_during_the_install_comes_after_it",),
+             "the command cannot tell that its new files were installed before the signal"),
 ]
 
 
