@@ -273,7 +273,32 @@ def test_render_on_a_read_only_file_system_is_one_line(run_copy):
     assert r.returncode == 2, r.stderr
     line = one_error_line(r.stderr)
     assert "Read-only file system" in line and str(run_copy) in line, line
+    assert "cannot write the pictures" in line, line  # the renderer's own line
     assert tree(run_copy) == before
+
+
+def test_the_renderers_own_error_line_is_taken_after_ffmpegs(monkeypatch):
+    """The renderer's stderr may begin with ffmpeg's complaints: its own message is the last
+    line, and that is the one the user gets."""
+    from fem_anim.errors import FemAnimError
+    from fem_anim.render import process
+
+    class Child:
+        args, returncode = ["render"], 2
+
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def communicate(self, timeout=None):
+            return "", ("[libx264 @ 0x1] error: disk full\nav_interleaved_write_frame(): "
+                        "failed\nfem-anim: error: cannot write the pictures of /r: No space "
+                        "left on device; nothing was replaced\n")
+
+    monkeypatch.setattr(process.subprocess, "Popen", Child)
+    with pytest.raises(FemAnimError) as info:
+        process.render_run(Path("/r"), {})
+    assert str(info.value) == ("cannot write the pictures of /r: No space left on device; "
+                               "nothing was replaced")
 
 
 def test_render_on_a_full_disk_is_one_line_and_installs_nothing(finished_run, tmp_path):

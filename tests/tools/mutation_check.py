@@ -384,7 +384,9 @@ MUTATIONS: list[Mutation] = [
              'last = message.splitlines()[-1] if message else ""',
              'last = message.splitlines()[0] if message else ""',
              ("tests/test_command_safety.py::"
-              "test_render_on_a_full_disk_is_one_line_and_installs_nothing",),
+              "test_render_on_a_full_disk_is_one_line_and_installs_nothing",
+              "tests/test_command_safety.py::"
+              "test_the_renderers_own_error_line_is_taken_after_ffmpegs"),
              "the renderer's error read from its first stderr line (ffmpeg's), not its own"),
     Mutation("trade-checks-after-the-study", "fem_anim/bench/trade.py",
              "            check_may_write(out, PRODUCTS)\n", "",
