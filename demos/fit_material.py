@@ -74,7 +74,7 @@ objective = TrajectoryMatch(reference.outdir)
 theta0 = model.parameters.values()
 J0, grad0 = model.evaluate(theta0, objective)
 for i, name in enumerate(model.names):
-    eps = 1e-5 * abs(theta0[i])
+    eps = 1e-4 * abs(theta0[i])  # above the forward solves' round-off in J, below truncation
     up, down = theta0.copy(), theta0.copy()
     up[i] += eps
     down[i] -= eps

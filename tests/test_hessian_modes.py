@@ -457,7 +457,8 @@ def test_mpi_equals_serial(tmp_path, hessian):
     Iteration counts are compared only within a measured slack, since the count is not
     what is checked: the two runs sum in different orders, and a step whose residual lands
     near the relative test after its third iteration takes a fourth (or a fifth) on one of
-    them (measured at step 6 under load, auto: 5 serial against 4 on 2 ranks; idle: 4 and 4).
+    them (measured at step 6 under load, auto: 5 serial against 4 on 2 ranks, and 6 against
+    4 on Debian 13 beside a second suite; idle: 4 and 4).
     abs and the trust-region filter converge linearly (the beam's tangent is indefinite at
     many points), so round-off may move their last iteration by one or two.
 
@@ -477,7 +478,7 @@ def test_mpi_equals_serial(tmp_path, hessian):
         assert r.returncode == 0, r.stderr
     a, b = read_stats(out[1] / "stats.csv"), read_stats(out[2] / "stats.csv")
     assert len(a) == len(b) == 6
-    slack = 1 if hessian == "auto" else 2
+    slack = 2
     for ra, rb in zip(a, b):
         assert rb["retries"] == ra["retries"] == 0
         for r in (ra, rb):
