@@ -216,10 +216,17 @@ def test_a_signal_during_the_install_comes_after_it(tmp_path, monkeypatch, where
         return real_install(staging, target, replaces=replaces)
 
     monkeypatch.setattr(products, "install", install_signalled)
-    with pytest.raises(KeyboardInterrupt):
-        with staged_products(folder, ["a.csv", "b.csv"]) as staging:
-            for name in ("a.csv", "b.csv"):
-                (staging / name).write_text("new")
+    # Python's own Ctrl-C handler, whatever this process inherited: started in the background
+    # by a non-interactive shell, SIGINT may be ignored, or left at the default, which would
+    # end the test process when the held signal is raised again
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with staged_products(folder, ["a.csv", "b.csv"]) as staging:
+                for name in ("a.csv", "b.csv"):
+                    (staging / name).write_text("new")
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert {n: (folder / n).read_text() for n in ("a.csv", "b.csv")} == \
         {"a.csv": "new", "b.csv": "new"}
     assert read_manifest(folder) == {"a.csv", "b.csv"}
