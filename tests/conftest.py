@@ -64,6 +64,34 @@ def mpirun_command(n: int) -> list[str] | None:
     return cmd
 
 
+def run_on_one_and_more_ranks(scene: Path, folder: Path, ranks: int = 2) -> dict[int, Path]:
+    """``fem-anim run -q SCENE`` on one rank, then under ``mpirun -n ranks`` (the test is
+    skipped without mpirun); each run must succeed.
+
+    Args:
+        scene: The scene file.
+        folder: Where the output folders ``out1`` and ``out<ranks>`` go.
+        ranks: The rank count of the second run.
+
+    Returns:
+        The output folder of each rank count.
+    """
+    import subprocess
+
+    outs = {}
+    for n in (1, ranks):
+        prefix = [] if n == 1 else mpirun_command(n)
+        if prefix is None:
+            pytest.skip("mpirun not available")
+        outs[n] = folder / f"out{n}"
+        r = subprocess.run(prefix + fem_anim_command() + ["run", "-q", str(scene), "-o",
+                                                          str(outs[n])],
+                           capture_output=True, text=True, timeout=600,
+                           env=clean_environment())
+        assert r.returncode == 0, r.stderr
+    return outs
+
+
 def process_tree(pid: int) -> list[int]:
     """A process and all its descendants, read from /proc.
 

@@ -201,11 +201,9 @@ def test_fold_on_two_ranks_equals_serial(tmp_path):
     """The U-fold with IPC friction (mu = 0.3) on 2 ranks: the energies of every step and the
     final displacement equal the serial run's to 1e-8 (the shell's triangles gathered to
     ipctk's rank and its forces sent back)."""
-    import subprocess
-
     import meshio
 
-    from conftest import clean_environment, fem_anim_command, mpirun_command
+    from conftest import run_on_one_and_more_ranks
     from test_cli import read_stats
 
     _u_fold(tmp_path / "fold.obj")
@@ -239,17 +237,7 @@ max = [0.101, 0.07, 0.019]
 [output]
 render = false
 """)
-    outs = {}
-    for ranks in (1, 2):
-        prefix = [] if ranks == 1 else mpirun_command(ranks)
-        if prefix is None:
-            pytest.skip("mpirun not available")
-        outs[ranks] = tmp_path / f"out{ranks}"
-        r = subprocess.run(prefix + fem_anim_command() + ["run", "-q", str(scene), "-o",
-                                                          str(outs[ranks])],
-                           capture_output=True, text=True, timeout=600,
-                           env=clean_environment())
-        assert r.returncode == 0, r.stderr
+    outs = run_on_one_and_more_ranks(scene, tmp_path)
     a, b = read_stats(outs[1] / "stats.csv"), read_stats(outs[2] / "stats.csv")
     assert len(a) == len(b) and max(row["contact_pairs"] for row in a) > 0
     for ra, rb in zip(a, b):

@@ -164,26 +164,14 @@ def test_work_of_the_wind_is_not_flagged_as_a_gain(tmp_path):
 def test_two_ranks_equal_serial_in_wind(tmp_path):
     """A sheet pinned on one edge in a slanted wind: 2 ranks' energies and final
     displacement equal the serial run's to 1e-8."""
-    import subprocess
-
     import meshio
 
-    from conftest import clean_environment, fem_anim_command, mpirun_command
+    from conftest import run_on_one_and_more_ranks
     from test_cli import read_stats
 
     scene = tmp_path / "flag.toml"
     scene.write_text(FLAG)
-    outs = {}
-    for ranks in (1, 2):
-        prefix = [] if ranks == 1 else mpirun_command(ranks)
-        if prefix is None:
-            pytest.skip("mpirun not available")
-        outs[ranks] = tmp_path / f"out{ranks}"
-        r = subprocess.run(prefix + fem_anim_command() + ["run", "-q", str(scene), "-o",
-                                                          str(outs[ranks])],
-                           capture_output=True, text=True, timeout=600,
-                           env=clean_environment())
-        assert r.returncode == 0, r.stderr
+    outs = run_on_one_and_more_ranks(scene, tmp_path)
     a, b = read_stats(outs[1] / "stats.csv"), read_stats(outs[2] / "stats.csv")
     assert len(a) == len(b) == 8
     for ra, rb in zip(a, b):
