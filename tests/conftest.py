@@ -92,6 +92,36 @@ def run_on_one_and_more_ranks(scene: Path, folder: Path, ranks: int = 2) -> dict
     return outs
 
 
+def step_taylor_remainders(problem, A, x, dx) -> tuple[list[float], list[float]]:
+    """The Taylor remainders of a step objective along ``dx`` from ``x``, h = 1, 1/2, 1/4, 1/8:
+    |g(x + h dx) - g(x) - h r(x).dx| and ||r(x + h dx) - r(x) - h H(x) dx|| (both fall at
+    order 2 when the residual r and the Hessian H, assembled into ``A``, are g's).
+
+    Args:
+        problem: The :class:`~fem_anim.problem.objective.EnergyProblem` (state at ``x``).
+        A: The PETSc matrix its Jacobian is assembled into.
+        x: The point (PETSc vector).
+        dx: The direction (PETSc vector).
+    """
+    g0 = problem.objective(None, x)
+    r0, r1 = x.duplicate(), x.duplicate()
+    problem.residual(None, x, r0)
+    problem.jacobian(None, x, A, A)
+    Hdx = x.duplicate()
+    A.mult(dx, Hdx)
+    first, second = [], []
+    for h in (1.0, 0.5, 0.25, 0.125):
+        xh = x.copy()
+        xh.axpy(h, dx)
+        first.append(abs(problem.objective(None, xh) - g0 - h * r0.dot(dx)))
+        problem.residual(None, xh, r1)
+        r1.axpy(-1.0, r0)
+        r1.axpy(-h, Hdx)
+        second.append(r1.norm())
+        xh.destroy()
+    return first, second
+
+
 def process_tree(pid: int) -> list[int]:
     """A process and all its descendants, read from /proc.
 

@@ -27,6 +27,7 @@ import pytest
 from dolfinx import mesh as dmesh
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
+from conftest import step_taylor_remainders
 from scenes import make_scene
 
 from fem_anim import compat
@@ -163,23 +164,7 @@ def test_barrier_taylor_on_p2_and_mixed_unknowns(tmp_path, formulation, nu):
     alpha = p.ipc.step_bound(-du)
     assert alpha > 0.5  # a direction the pairs feel, not one the CCD shrinks to nothing
     dx.scale(alpha)
-    g0 = p.objective(None, x)
-    r0, r1 = x.duplicate(), x.duplicate()
-    p.residual(None, x, r0)
-    A = sim.minimiser.A
-    p.jacobian(None, x, A, A)
-    Hdx = x.duplicate()
-    A.mult(dx, Hdx)
-    first, second = [], []
-    for h in (1.0, 0.5, 0.25, 0.125):
-        xh = x.copy()
-        xh.axpy(h, dx)
-        first.append(abs(p.objective(None, xh) - g0 - h * r0.dot(dx)))
-        p.residual(None, xh, r1)
-        r1.axpy(-1.0, r0)
-        r1.axpy(-h, Hdx)
-        second.append(r1.norm())
-        xh.destroy()
+    first, second = step_taylor_remainders(p, sim.minimiser.A, x, dx)
     for remainders in (first, second):
         rates = np.log2(np.array(remainders[:-1]) / np.array(remainders[1:]))
         assert np.all(rates > 1.8), (first, second)
