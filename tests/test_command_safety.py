@@ -29,6 +29,7 @@ from conftest import clean_environment, fem_anim_command
 from fem_anim.cli import main
 from fem_anim.output.products import STAGING_PREFIX, check_may_write, staged_products
 from fem_anim.output.rundir import LOCK, MARKER, claim, install, read_manifest, write_manifest
+from fem_anim.render.animation import read_run
 
 COARSE = ["--set", "mesh.element_size=0.1", "--set", "output.render=false"]
 PREFIX = "fem-anim: error: "
@@ -188,7 +189,7 @@ def test_a_signal_during_the_install_comes_after_it(tmp_path, monkeypatch, where
     """SIGINT while the products are being renamed into place (seen under load: the render
     had staged everything when the signal came) is delivered once all of them are: the new
     files are complete, the manifest lists them, no staging folder stays, and the folder is
-    named by installed_before_a_signal. Delivered to another thread (VTK's or a BLAS pool's,
+    named by installed_by_this_process. Delivered to another thread (VTK's or a BLAS pool's,
     which the main thread's mask does not cover), Python runs the handler in the main thread
     at once: the install must still not be cut in half."""
     import threading
@@ -231,7 +232,7 @@ def test_a_signal_during_the_install_comes_after_it(tmp_path, monkeypatch, where
         {"a.csv": "new", "b.csv": "new"}
     assert read_manifest(folder) == {"a.csv", "b.csv"}
     assert not any(name.startswith(STAGING_PREFIX) for name in os.listdir(folder))
-    assert folder in products.installed_before_a_signal()
+    assert folder in products.installed_by_this_process()
 
 
 # -- render ----------------------------------------------------------------------------------
@@ -308,6 +309,56 @@ def test_the_renderers_own_error_line_is_taken_after_ffmpegs(monkeypatch):
                                "nothing was replaced")
 
 
+def test_a_signal_after_the_renderers_install_says_the_pictures_are_complete(
+        tmp_path, monkeypatch, capsys):
+    """A signal that reaches the renderer after its pictures were installed (while it removes
+    its staging folder, prints its summary or exits: seen in CI under load) must not be
+    reported as "nothing was installed": the new pictures are in place and complete."""
+    from fem_anim.render import process
+
+    def render_then_signalled(path, settings):
+        with staged_products(path, ["final.png"]) as staging:
+            (staging / "final.png").write_bytes(b"new")
+        os.kill(os.getpid(), signal.SIGINT)  # after the install, before the renderer returns
+        time.sleep(1.0)  # the handler raises here
+
+    monkeypatch.setattr(process, "render_directory", render_then_signalled)
+    handlers = {sig: signal.getsignal(sig) for sig in process.STOP_SIGNALS}
+    try:
+        status = process.main(["--run", str(tmp_path)])
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+    assert status == 128 + signal.SIGINT
+    assert one_error_line(capsys.readouterr().err) == \
+        f"{PREFIX}{process.INSTALLED_THEN_STOPPED}"
+    assert (tmp_path / "final.png").read_bytes() == b"new"
+
+
+def test_a_signal_to_the_command_after_its_renderer_finished_says_so(run_copy, monkeypatch):
+    """Ctrl-C reaches the whole process group: the command may take it after its renderer
+    has finished and installed everything (exit 0, nothing on stderr). It then says that the
+    new pictures are complete, not that nothing was installed."""
+    from fem_anim.errors import Interrupted
+    from fem_anim.render import process
+
+    class InterruptedOnce(subprocess.Popen):
+        taken = False
+
+        def communicate(self, *args, **kwargs):
+            if not InterruptedOnce.taken:
+                InterruptedOnce.taken = True
+                self.wait()  # the renderer finishes, then the command is interrupted
+                raise KeyboardInterrupt
+            return super().communicate(*args, **kwargs)
+
+    monkeypatch.setattr(process.subprocess, "Popen", InterruptedOnce)
+    with pytest.raises(Interrupted) as info:
+        process.render_run(run_copy, {"outputs": []})
+    assert str(info.value) == process.INSTALLED_THEN_STOPPED
+    assert "final.png" in read_manifest(run_copy) and (run_copy / "final.png").is_file()
+
+
 def test_render_on_a_full_disk_is_one_line_and_installs_nothing(finished_run, tmp_path):
     """A 600 kB tmpfs holding the run (about 60 kB): the GIF, MP4 and frames do not fit."""
     mnt = tmp_path / "small"
@@ -359,13 +410,18 @@ def test_signal_while_rendering_leaves_the_old_pictures(tmp_path, sig):
             time.sleep(0.05)
     after = tree(out)
     assert not any(name.startswith(STAGING_PREFIX) for name in os.listdir(out))
-    assert not (out / "frames").exists()
     if sig == signal.SIGINT and "new pictures were installed" in stderr:
         # the signal came while the finished pictures were renamed into place (it is held
-        # then): all of them are new, and listed
-        assert "animation.gif" in read_manifest(out) and "animation.gif" in after
+        # then): all of them are new, complete and listed - one PNG per trajectory frame
+        manifest = read_manifest(out)
+        frames = sorted(name for name in after if name.startswith("frames/"))
+        assert len(frames) == read_run(out).times.size
+        assert set(frames) <= manifest
+        assert all(after[name].startswith(b"\x89PNG") for name in frames)
+        assert "animation.gif" in manifest and "animation.gif" in after
         assert after["final.png"] != before["final.png"]
     else:
+        assert not (out / "frames").exists()
         assert after == before  # no frame, no GIF, no staging folder
 
 

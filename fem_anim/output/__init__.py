@@ -43,7 +43,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "foreign_files": "rundir",
     "STAGING_PREFIX": "products",
     "check_may_write": "products",
-    "installed_before_a_signal": "products",
+    "installed_by_this_process": "products",
     "staged_products": "products",
     "write_product": "products",
 })

@@ -16,9 +16,10 @@ an exporter) uses this module:
   with SIGINT, SIGTERM and SIGHUP held meanwhile so that all are installed or none. An
   error or an interrupt removes the staging folder: no half-written file ever sits under
   a product's name, and the previous products stay as they were. A signal that arrives
-  while the files are being installed is delivered once they all are
-  (:func:`installed_before_a_signal` then names the folder, so the command can say that its
-  new files are complete rather than "nothing was installed");
+  while the files are being installed is delivered once they all are. A command stopped
+  by a signal asks :func:`installed_by_this_process` whether its install had completed
+  (the signal came during it, or after it), so that it says its new files are complete
+  rather than "nothing was installed";
 * :func:`write_product`: one file (``-o FILE.md``) the same way.
 
 A file of the manifest that the command may write but did not write this time (a plot of
@@ -39,7 +40,7 @@ from pathlib import Path
 from fem_anim.errors import FemAnimError
 from fem_anim.output.rundir import MARKER, foreign_files, install, read_manifest
 
-__all__ = ["check_may_write", "staged_products", "write_product", "installed_before_a_signal",
+__all__ = ["check_may_write", "staged_products", "write_product", "installed_by_this_process",
            "STAGING_PREFIX"]
 
 #: Prefix of the staging folders (hidden, unique per command; removed when it ends).
@@ -47,13 +48,14 @@ STAGING_PREFIX = ".fem_anim-staging-"
 #: The stop signals held while a product set is installed.
 HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
-_installed_before_signal: list[Path] = []
+_installed: list[Path] = []
 
 
-def installed_before_a_signal() -> list[Path]:
-    """The folders of this process whose new products were installed completely although a
-    stop signal arrived during the install (it was delivered right after it)."""
-    return list(_installed_before_signal)
+def installed_by_this_process() -> list[Path]:
+    """The folders into which this process has installed a complete product set: a stop
+    signal that arrives during the install (it is delivered right after it) or later no
+    longer undoes anything there."""
+    return list(_installed)
 
 
 def check_may_write(folder: Path, names: Iterable[str], comm=None) -> None:
@@ -135,10 +137,10 @@ def _signals_held(folder: Path) -> Iterator[None]:
     Two layers: the main thread's signal mask, and Python handlers that only note the
     signal, because another thread of the process (VTK's, a BLAS pool's) may take the
     signal, and Python then runs the handler in the main thread at once, inside the block.
-    When the block ends, the handlers and the mask are restored and the first signal noted
-    (or left pending by the mask) is raised again, so the command's own handler sees it
-    after the block: after a completed install, the folder is then listed by
-    :func:`installed_before_a_signal`.
+    When the block ends, the folder is listed by :func:`installed_by_this_process` if the
+    block completed, the handlers and the mask are restored, and the first signal noted (or
+    left pending by the mask) is raised again, so the command's own handler sees it after
+    the block, and can tell that the install was whole.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -152,6 +154,7 @@ def _signals_held(folder: Path) -> Iterator[None]:
     try:
         yield
         completed = True
+        _installed.append(Path(folder))
     finally:
         for sig in sorted(signal.sigpending() & set(HELD_SIGNALS)):
             arrived.append(signal.sigwait({sig}))  # taken while still blocked
@@ -159,8 +162,6 @@ def _signals_held(folder: Path) -> Iterator[None]:
         for sig, handler in handlers.items():  # None: a handler not set from Python
             signal.signal(sig, signal.SIG_DFL if handler is None else handler)
         if arrived:
-            if completed:
-                _installed_before_signal.append(Path(folder))
             signal.raise_signal(arrived[0])
 
 

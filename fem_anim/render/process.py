@@ -11,7 +11,9 @@ The process reports every error a user or the system can cause (a folder holding
 fem_anim did not write, a read-only or full file system) as one ``fem-anim: error:`` line
 and exit code 2, an interrupt with exit code 130; its caller raises them again as
 :class:`~fem_anim.errors.FemAnimError` and :class:`~fem_anim.errors.Interrupted`. An
-interrupted rendering installs nothing (:mod:`fem_anim.output.products`).
+interrupted rendering installs nothing (:mod:`fem_anim.output.products`), unless the signal
+came while or after its finished pictures were installed: then both processes say that the
+new pictures are complete.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import sys
 from pathlib import Path
 
 from fem_anim.errors import FemAnimError, Interrupted, describe_os_error
-from fem_anim.output.products import installed_before_a_signal
+from fem_anim.output.products import installed_by_this_process
 from fem_anim.render.animation import render_directory
 from fem_anim.render.frames import render_vtu
 
@@ -33,14 +35,16 @@ __all__ = ["render_file", "render_run", "STOP_SIGNALS"]
 
 #: Signals that stop a rendering: it removes its staged files and installs nothing.
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-#: What the renderer says when a signal came while its finished pictures were installed.
+#: What the renderer says when a signal came while or after its finished pictures were
+#: installed (and its caller, when the renderer had finished).
 INSTALLED_THEN_STOPPED = ("rendering interrupted after its new pictures were installed; "
                           "they are complete")
 
 
-def _interrupted(stderr: str, signum: int) -> Interrupted:
-    """The parent's account of an interrupted renderer, true to what the renderer did."""
-    if INSTALLED_THEN_STOPPED in stderr:
+def _interrupted(stderr: str, signum: int, returncode: int | None = None) -> Interrupted:
+    """The parent's account of an interrupted renderer, true to what the renderer did: it
+    had finished (``returncode`` 0), or said that its pictures were installed, or not."""
+    if returncode == 0 or INSTALLED_THEN_STOPPED in stderr:
         return Interrupted(INSTALLED_THEN_STOPPED, signum)
     return Interrupted(f"rendering interrupted by signal {signum}; nothing was installed, "
                        "the previous pictures are as they were", signum)
@@ -71,7 +75,7 @@ def _run_renderer(args: list[str]) -> subprocess.CompletedProcess:
             child.kill()
             child.wait()
             stderr = ""
-        raise _interrupted(stderr or "", signal.SIGINT) from None
+        raise _interrupted(stderr or "", signal.SIGINT, child.returncode) from None
     proc = subprocess.CompletedProcess(child.args, child.returncode, stdout, stderr)
     message = proc.stderr.strip()
     last = message.splitlines()[-1] if message else ""  # after ffmpeg's own complaints
@@ -134,7 +138,8 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         The exit status: 0; 2 with a one-line ``fem-anim: error:`` message on stderr for
-        bad input or an OS error; 130 if interrupted (nothing installed).
+        bad input or an OS error; 130 if interrupted (nothing installed, unless it says
+        that its new pictures were installed: a signal during or after the install).
     """
     parser = argparse.ArgumentParser(prog="python -m fem_anim.render.process")
     parser.add_argument("files", nargs="*", metavar="VTU PNG")
@@ -160,6 +165,8 @@ def main(argv: list[str] | None = None) -> int:
             render_vtu(Path(args.files[0]), Path(args.files[1]), args.title, settings)
         else:
             parser.error("give VTU PNG, or --run OUTDIR")
+        for sig in STOP_SIGNALS:  # done: a signal now changes nothing (exit code 0)
+            signal.signal(sig, signal.SIG_IGN)
     except FemAnimError as err:
         print(f"fem-anim: error: {err}", file=sys.stderr)
         return 2
@@ -169,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{describe_os_error(err, target)}; nothing was replaced", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        if args.run and Path(args.run) in installed_before_a_signal():
+        if args.run and Path(args.run) in installed_by_this_process():
             print(f"fem-anim: error: {INSTALLED_THEN_STOPPED}", file=sys.stderr)
         else:
             print("fem-anim: error: rendering interrupted; nothing was installed",

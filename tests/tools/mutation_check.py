@@ -1214,9 +1214,17 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_command_safety.py::test_a_signal_during_the_install_comes_after_it",),
              "a signal that came during the install is swallowed"),
     Mutation("install-signal-not-recorded", "fem_anim/output/products.py",
-             "                _installed_before_signal.append(Path(folder))", "                pass",
-             ("tests/test_command_safety.py::test_a_signal_during_the_install_comes_after_it",),
+             "        _installed.append(Path(folder))\n", "",
+             ("tests/test_command_safety.py::test_a_signal_during_the_install_comes_after_it",
+              "tests/test_command_safety.py::test_a_signal_after_the_renderers_install_says_the"
+              "_pictures_are_complete"),
              "the command cannot tell that its new files were installed before the signal"),
+    Mutation("render-finished-then-interrupted", "fem_anim/render/process.py",
+             "    if returncode == 0 or INSTALLED_THEN_STOPPED in stderr:",
+             "    if INSTALLED_THEN_STOPPED in stderr:",
+             ("tests/test_command_safety.py::test_a_signal_to_the_command_after_its_renderer_"
+              "finished_says_so",),
+             "Ctrl-C after the renderer finished says nothing was installed"),
 ]
 
 
