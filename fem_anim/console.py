@@ -10,12 +10,12 @@ import argparse
 import contextlib
 import logging
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from fem_anim.errors import FemAnimError
+from fem_anim.errors import FemAnimError, describe_os_error
 
-__all__ = ["OneLineParser", "print_error", "quiet_jit_logging", "quiet_jit"]
+__all__ = ["OneLineParser", "print_error", "exit_status", "quiet_jit_logging", "quiet_jit"]
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -39,6 +39,27 @@ def print_error(message: str) -> None:
     if MPI.COMM_WORLD.rank == 0:
         line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
         print(f"fem-anim: error: {line}", file=sys.stderr, flush=True)
+
+
+def exit_status(command: Callable[[], int], target: Callable[[], str | Path | None]) -> int:
+    """Run a command's body and turn a user's or the system's error into one line and exit 2.
+
+    Args:
+        command: The body; returns the exit status.
+        target: The file or folder an OS error is about when the error names none itself
+            (called only then; e.g. the ``--out`` folder once the arguments are parsed).
+
+    Returns:
+        ``command()``'s status; 2 after :func:`print_error` for a
+        :class:`~fem_anim.errors.FemAnimError` or an :class:`OSError`.
+    """
+    try:
+        return command()
+    except FemAnimError as err:
+        print_error(str(err))
+    except OSError as err:
+        print_error(describe_os_error(err, target()))
+    return 2
 
 
 def quiet_jit_logging() -> None:

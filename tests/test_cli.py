@@ -273,3 +273,30 @@ def test_summary_records_provenance(default_run):
     rows = read_stats(default_run / "stats.csv")
     assert wall["stepping_s"] == pytest.approx(sum(r["step_wall_s"] for r in rows), rel=1e-6)
     assert wall["mesh_s"] > 0.0 and wall["render_s"] > 0.0  # the default scene renders
+
+
+def test_a_bench_commands_errors_are_one_line_and_exit_2(capsys):
+    """``console.exit_status``, the benches' error tail: a user's error and an OS error are
+    one ``fem-anim: error:`` line and exit 2 (the OS error names the target when it names no
+    file itself), a finished body's status is passed through."""
+    import errno
+
+    from fem_anim.console import exit_status
+    from fem_anim.errors import FemAnimError
+
+    def fails(err):
+        def body():
+            raise err
+        return body
+
+    assert exit_status(lambda: 0, lambda: "unused") == 0
+    assert exit_status(fails(FemAnimError("--steps: must be between 2 and 1000")),
+                       lambda: "out") == 2
+    assert capsys.readouterr().err == \
+        "fem-anim: error: --steps: must be between 2 and 1000\n"
+    assert exit_status(fails(OSError(errno.ENOSPC, "No space left on device")),
+                       lambda: "results/peers") == 2
+    assert capsys.readouterr().err == \
+        "fem-anim: error: results/peers: No space left on device\n"
+    with pytest.raises(ZeroDivisionError):  # a bug is not the user's error: it propagates
+        exit_status(fails(ZeroDivisionError()), lambda: "out")

@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.errors import FemAnimError
 from fem_anim.output.products import check_may_write, write_product
 
 __all__ = ["SCENES", "SIZES", "scene_text", "run_scene", "summarise", "physics_check",
@@ -416,7 +416,7 @@ def _kept_entries(path: Path, names: list[str], size: str) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     from fem_anim.bench.report import machine_text
-    from fem_anim.console import OneLineParser, print_error
+    from fem_anim.console import OneLineParser, exit_status
     from fem_anim.petsc_options import init_petsc
 
     init_petsc([])
@@ -426,7 +426,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=None)
     p.add_argument("--out", default="demos/results/contact_set")
     p.add_argument("--no-pictures", action="store_true")
-    try:
+    args = None
+
+    def run() -> int:
+        nonlocal args
         args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
         from mpi4py import MPI
 
@@ -468,12 +471,8 @@ def main(argv: list[str] | None = None) -> int:
         write_product(out / "contact_set.md", (text + "\n").encode())
         print(text)
         return 0
-    except FemAnimError as err:
-        print_error(str(err))
-        return 2
-    except OSError as err:
-        print_error(describe_os_error(err, args.out))
-        return 2
+
+    return exit_status(run, lambda: args.out)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.errors import FemAnimError
 from fem_anim.output.products import check_may_write, write_product
 
 __all__ = ["main", "peer_table", "peer_python", "PEER_VENV"]
@@ -201,7 +201,7 @@ def _load() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from fem_anim.console import OneLineParser, print_error
+    from fem_anim.console import OneLineParser, exit_status
     from fem_anim.petsc_options import init_petsc
 
     init_petsc([])
@@ -212,7 +212,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=10)
     p.add_argument("--set", dest="overrides", action="append", default=[])
     p.add_argument("--out", default="demos/results/peers")
-    try:
+    args = None
+
+    def run() -> int:
+        nonlocal args
         args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
         try:
             sizes = [float(v) for v in args.sizes.split(",")]
@@ -224,12 +227,8 @@ def main(argv: list[str] | None = None) -> int:
         check_may_write(out, ["peers.md"])  # before the runs, not after
         print(peer_table(args.scene, args.overrides, out, sizes=sizes, steps=args.steps))
         return 0
-    except FemAnimError as err:
-        print_error(str(err))
-        return 2
-    except OSError as err:
-        print_error(describe_os_error(err, args.out))
-        return 2
+
+    return exit_status(run, lambda: args.out)
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.errors import ConvergenceError, FemAnimError, describe_os_error
+from fem_anim.errors import ConvergenceError, FemAnimError
 from fem_anim.output.products import check_may_write, write_product
 
 __all__ = ["CONFIGS", "FLOOR", "SIZES", "VBD_SWEEPS", "compare", "main", "preview_table",
@@ -220,7 +220,7 @@ def split_text(splits: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from fem_anim.console import OneLineParser, print_error
+    from fem_anim.console import OneLineParser, exit_status
     from fem_anim.petsc_options import init_petsc
 
     init_petsc([])
@@ -233,7 +233,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-install", action="store_true",
                    help="do not install pbatoolkit if it is missing (compare fem_anim only)")
     p.add_argument("--out", default="demos/results/preview")
-    try:
+    args = None
+
+    def run() -> int:
+        nonlocal args
         args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
         try:
             sizes = [tuple(int(v) for v in d.split(",")) for d in args.divisions] or SIZES
@@ -251,12 +254,8 @@ def main(argv: list[str] | None = None) -> int:
         print(preview_table(out, sizes, args.steps, sweeps=sweeps,
                             install=not args.no_install))
         return 0
-    except FemAnimError as err:
-        print_error(str(err))
-        return 2
-    except OSError as err:
-        print_error(describe_os_error(err, args.out))
-        return 2
+
+    return exit_status(run, lambda: args.out)
 
 
 if __name__ == "__main__":
