@@ -48,14 +48,24 @@ def duplicate_vertices(points: np.ndarray) -> int:
     return int(points.shape[0] - np.unique(q, axis=0).shape[0])
 
 
-def check_one_body(points: np.ndarray, cells: np.ndarray, source: str) -> None:
+def check_one_body(points: np.ndarray, cells: np.ndarray, source: str,
+                   several_pieces: bool = False) -> None:
     """Refuse a mesh of several pieces, or one with coincident unmerged vertices.
+
+    Args:
+        points: ``(n, gdim)`` vertex coordinates.
+        cells: ``(m, k)`` vertex indices.
+        source: What the mesh is, for the message.
+        several_pieces: Accept several pieces (a shell's layers of cloth, which meet through
+            its self contact only); duplicate vertices are still refused.
 
     Raises:
         MeshError: naming the number of pieces and of duplicate vertices.
     """
     labels = cell_components(cells, points.shape[0])
     pieces = int(labels.max()) + 1 if labels.size else 0
+    if several_pieces:
+        pieces = min(pieces, 1)
     duplicates = duplicate_vertices(points)
     if pieces <= 1 and duplicates == 0:
         return

@@ -3,7 +3,8 @@
 :func:`build_shell_mesh` makes the triangles on rank 0 from the scene's ``[mesh]`` (the
 gmsh sheet of :mod:`fem_anim.meshes.sheet`, or a surface file meshio reads), checks
 them (:func:`check_shell_surface`: no degenerate triangle, no edge shared by more than two
-triangles, one connected piece; orientation is not needed: the bending energy orients the
+triangles, no unmerged duplicate vertex; several pieces are layers of one shell, which meet
+through its self contact; orientation is not needed: the bending energy orients the
 two triangles of each edge by their rest normals, :mod:`fem_anim.problem.shell_terms`) and
 distributes them with the manifold coordinate element of :func:`fem_anim.compat.create_mesh`.
 """
@@ -26,7 +27,8 @@ __all__ = ["build_shell_mesh", "check_shell_surface", "shell_arrays"]
 
 
 def check_shell_surface(points: np.ndarray, triangles: np.ndarray, source: str) -> None:
-    """Reject a surface a shell cannot be: degenerate, non-manifold or in pieces.
+    """Reject a surface a shell cannot be: degenerate, non-manifold or unmerged (several
+    connected pieces are accepted: layers of cloth of one material).
 
     Args:
         points: ``(n, 3)`` vertex coordinates.
@@ -58,7 +60,7 @@ def check_shell_surface(points: np.ndarray, triangles: np.ndarray, source: str) 
         raise MeshError(f"{source}: non-manifold surface: the edge from vertex {a} to vertex "
                         f"{b} belongs to {counts.max()} triangles (a shell's edges have one "
                         "or two)")
-    check_one_body(points, triangles, source)
+    check_one_body(points, triangles, source, several_pieces=True)
 
 
 def shell_arrays(cfg: dict, base_dir: Path) -> tuple[np.ndarray, np.ndarray, str]:

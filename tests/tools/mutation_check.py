@@ -1225,6 +1225,18 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_command_safety.py::test_a_signal_to_the_command_after_its_renderer_"
               "finished_says_so",),
              "Ctrl-C after the renderer finished says nothing was installed"),
+    Mutation("cloth-friction-mu-twice", "fem_anim/contact/ipc.py",
+             '                              float(self.cfg["friction"]))',
+             '                              2 * float(self.cfg["friction"]))',
+             ("tests/test_cloth_friction.py::"
+              "test_sheet_thrown_on_a_held_sheet_stops_at_coulomb_distance",
+              "tests/test_cloth_friction.py::test_free_sheets_exchange_momentum_by_friction"),
+             "IPC's friction between shells applies mu twice (the deceleration is 2 mu g)"),
+    Mutation("cloth-layers-refused", "fem_anim/mesh/shell_mesh.py",
+             "check_one_body(points, triangles, source, several_pieces=True)",
+             "check_one_body(points, triangles, source)",
+             ("tests/test_cloth_friction.py::test_free_sheets_exchange_momentum_by_friction",),
+             "a shell surface of two layers of cloth is refused as two bodies"),
 ]
 
 

@@ -1,0 +1,213 @@
+"""Cloth on cloth: IPC friction between two sheets against Coulomb's law.
+
+Two sheets (one shell surface of two pieces, :mod:`fem_anim.mesh.shell_mesh`) lie one on the
+other, kept their thickness t apart by ipctk's codimensional contact (``dmin = t``,
+:mod:`fem_anim.contact.ipc`), with IPC's lagged friction mu between them. The top sheet,
+thrown along x at v0, feels the friction mu N with N its weight m g:
+
+* on a held (pinned) sheet it decelerates at mu g and stops after v0^2 / (2 mu g);
+* on a free sheet lying on frictionless ground the pair exchanges momentum: the top sheet
+  decelerates at mu g, the bottom one accelerates at mu g m_top / m_bottom, the horizontal
+  momentum m_top v0 is kept (to round-off: the friction is a pair force and the ground
+  pushes along z only) and both end at the common velocity v0 m_top / (m_top + m_bottom).
+
+Implicit Euler integrates Coulomb's law exactly in velocity: while the top sheet slides,
+each step takes mu g dt off its velocity (with the normal force lagged at the step's start,
+as IPC lags it), so the per-step velocity drop is checked against mu g dt, and the positions
+against the recurrence v_{k+1} = max(v_k - a dt, 0), x_{k+1} = x_k + dt v_{k+1}, which
+differs from the continuum v0^2 / (2 a) by v0 dt / 2 (first order). The smoothing of the
+friction below eps_v (ipctk's f1 over eps_v dt in displacement) acts only once the relative
+speed is below eps_v: it changes the stop by at most eps_v^2 / (2 a), negligible here.
+The normal force is the barrier's: each run first lets the sheets settle under gravity to
+the barrier's equilibrium gap (``_settled``), whose positions are the rest shape of the
+sliding run, so the lagged normal force equals the weight from the first step on. Every
+frame of every run is checked by the independent intersection check
+(:func:`fem_anim.contact.intersection.crossed_frames`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fem_anim.contact.intersection import crossed_frames
+from fem_anim.meshes.sheet import structured_sheet
+
+T, RHO, E, G, DHAT = 0.002, 500.0, 1.0e6, 9.81, 1.0e-3
+MU, V0 = 0.3, 0.3
+
+
+def _write_obj(path, points, cells):
+    # repr of Python floats (numpy 2 writes np.float64(...) for its own scalars)
+    lines = ["v " + " ".join(repr(float(c)) for c in p) for p in points]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in cells]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _two_sheets(path, bottom_size, bottom_origin, h):
+    """A 6 cm square sheet 1.2 d_hat above a bottom sheet (itself at ``bottom_origin``),
+    shifted by h / 3 so that no vertex of one lies over a vertex of the other."""
+    bottom, cb = structured_sheet(bottom_size, [round(s / h) for s in bottom_size],
+                                  origin=bottom_origin, triangulation="alternate")
+    z = bottom_origin[2] + T + 1.2 * DHAT
+    top, ct = structured_sheet([0.06, 0.06], [round(0.06 / h)] * 2,
+                               origin=[-0.03 + h / 3, -0.03 + h / 3, z],
+                               triangulation="alternate")
+    _write_obj(path, np.vstack([bottom, top]), np.vstack([cb, ct + len(bottom)]))
+
+
+def _scene(path, dt, steps, epsv, **extra):
+    scene = {"name": "layers", "mesh": {"shape": "file", "file": str(path)},
+             "shell": {"thickness": T},
+             "material": {"model": "stvk", "youngs_modulus": E, "poisson_ratio": 0.3,
+                          "density": RHO, "mass": "lumped"},
+             "time": {"integrator": "implicit_euler", "dt": dt, "steps": steps},
+             "output": {"render": False, "fps": 1.0 / dt},
+             "gravity": {"acceleration": [0.0, 0.0, -G]},
+             "contact": {"dhat": DHAT, "friction": MU, "epsv": epsv, "stiffness": 1.0e4}}
+    scene.update(extra)
+    return scene
+
+
+def _frames(scene, out):
+    import fem_anim
+
+    with fem_anim.run(fem_anim.Scene.from_dict(scene), out) as run:
+        return run.points, run.cells, [run.displacement(k) for k in range(len(run.times))]
+
+
+def _settled(tmp_path, scene):
+    """Let the scene's sheets settle at rest (20 steps, no initial velocity) and write the
+    settled surface as an OBJ file: the rest shape of the sliding run."""
+    points, cells, frames = _frames(scene, tmp_path / "settle")
+    settled = tmp_path / "settled.obj"
+    _write_obj(settled, points + frames[-1], cells)
+    return settled
+
+
+def _vertex_mass(points, cells):
+    """The lumped mass of each vertex (a third of each triangle's rho t area)."""
+    e1, e2 = points[cells[:, 1]] - points[cells[:, 0]], points[cells[:, 2]] - points[cells[:, 0]]
+    area = np.linalg.norm(np.cross(e1, e2), axis=1) / 2
+    m = np.zeros(len(points))
+    np.add.at(m, cells.ravel(), np.repeat(RHO * T * area / 3, 3))
+    return m
+
+
+def _coulomb_recurrence(v0, a, dt, steps):
+    """Implicit Euler's positions under a constant friction deceleration a until it stops:
+    v_{k+1} = max(v_k - a dt, 0), x_{k+1} = x_k + dt v_{k+1}."""
+    v = np.maximum(v0 - a * dt * np.arange(1, steps + 1), 0.0)
+    return np.r_[0.0, np.cumsum(dt * v)]
+
+
+def _slide_on_held_sheet(tmp_path, h, dt, epsv, steps):
+    """Top sheet thrown at V0 on a pinned sheet: the top's positions and velocities (mass
+    weighted along x) and the run's frames."""
+    _two_sheets(tmp_path / "layers.obj", [0.2, 0.1], [-0.05, -0.05, 0.0], h)
+    pin = [{"min": [-0.06, -0.06, -0.001], "max": [0.16, 0.06, 0.001]}]
+    settled = _settled(tmp_path, _scene(tmp_path / "layers.obj", dt, 20, epsv, pin=pin))
+    scene = _scene(settled, dt, steps, epsv, pin=pin, initial={"velocity": [V0, 0.0, 0.0]})
+    points, cells, frames = _frames(scene, tmp_path / "slide")
+    top = points[:, 2] > T / 2
+    m = _vertex_mass(points, cells)[top]
+    x = np.array([m @ u[top, 0] / m.sum() for u in frames])
+    return x, points, cells, frames, top
+
+
+def _check_held_slide(x, points, cells, frames, top, dt, stop_tol):
+    v = np.diff(x) / dt
+    sliding = np.flatnonzero(v > MU * G * dt)  # steps that end still sliding
+    drop = -np.diff(np.r_[V0, v])[sliding]
+    assert len(sliding) >= 5
+    assert drop.mean() == pytest.approx(MU * G * dt, rel=0.01)  # decelerates at mu g
+    # each step's velocity near the straight line (a step's drop varies by some per cent
+    # as the barrier's pairs change where vertices pass over the other sheet's edges)
+    line = V0 - MU * G * dt * (sliding + 1)
+    assert np.abs(v[sliding] - line).max() < 0.01 * V0
+    discrete = _coulomb_recurrence(V0, MU * G, dt, len(x) - 1)
+    assert np.abs(x - discrete).max() < 0.01 * discrete[-1]
+    assert abs(v[-1]) < 1e-3 * V0  # it stopped
+    assert x[-1] == pytest.approx(V0 ** 2 / (2 * MU * G), rel=stop_tol)
+    gap = min((points[top, 2] + u[top, 2]).min() for u in frames)
+    assert gap >= T * (1 - 1e-9)  # the mid-surfaces never nearer than t
+    assert crossed_frames(points, cells, frames) == []
+
+
+def test_sheet_thrown_on_a_held_sheet_stops_at_coulomb_distance(tmp_path):
+    """Reduced (2 cm elements, dt = 5 ms): the top sheet's velocity drops by mu g dt each
+    step while it slides (1 % on average; each step's velocity within 1 % of v0 of the line
+    v0 - mu g t), its positions follow implicit Euler's Coulomb recurrence
+    (1 % of the stop), and it stops at v0^2 / (2 mu g) within mu g dt / v0 + 1 % (the
+    scheme's first-order lag v0 dt / 2); no crossing, never nearer than t."""
+    dt = 0.005
+    x, points, cells, frames, top = _slide_on_held_sheet(tmp_path, 0.02, dt, 1e-3, 28)
+    _check_held_slide(x, points, cells, frames, top, dt, MU * G * dt / V0 + 0.01)
+
+
+@pytest.mark.slow
+def test_sheet_thrown_on_a_held_sheet_converges_to_coulomb_distance(tmp_path):
+    """Fuller: 1 cm elements, dt = 1 ms, eps_v = 1e-4 m/s: the same checks, and the stop
+    within 1.5 % of v0^2 / (2 mu g) (the scheme's lag is 1 % of it at this dt)."""
+    dt = 0.001
+    x, points, cells, frames, top = _slide_on_held_sheet(tmp_path, 0.01, dt, 1e-4, 120)
+    _check_held_slide(x, points, cells, frames, top, dt, 0.015)
+
+
+def _slide_on_free_sheet(tmp_path, monkeypatch, h, dt, epsv, steps):
+    """The top sheet thrown at V0 on a free sheet lying on frictionless ground.
+
+    ``[initial]`` gives the whole surface one rigid velocity, so the test gives the top
+    sheet alone its velocity by replacing the run's initial-velocity function."""
+    import fem_anim.simulation.loop as loop
+
+    ground = [{"type": "plane", "point": [0.0, 0.0, 0.0], "normal": [0, 0, 1], "dhat": DHAT}]
+    # centred on the top sheet across x: the friction's line of action passes through the
+    # pair's centre of mass, so the sheets do not spin about z
+    _two_sheets(tmp_path / "layers.obj", [0.12, 0.08], [-0.05, -0.04 + h / 3,
+                                                        T / 2 + 1.2 * DHAT], h)
+    settled = _settled(tmp_path, _scene(tmp_path / "layers.obj", dt, 20, epsv,
+                                        obstacle=ground))
+    cut = 1.5 * T + DHAT  # between the layers: bottom ~ t / 2 + d*, top ~ 3 t / 2 + d*
+
+    def top_velocity(scene, problem):
+        X = problem.V.tabulate_dof_coordinates()
+        v = np.zeros_like(X)
+        v[X[:, 2] > cut, 0] = V0
+        return v.reshape(-1)
+
+    monkeypatch.setattr(loop, "initial_velocity", top_velocity)
+    points, cells, frames = _frames(_scene(settled, dt, steps, epsv, obstacle=ground),
+                                    tmp_path / "slide")
+    top = points[:, 2] > cut
+    return points, cells, frames, top
+
+
+def _check_free_slide(points, cells, frames, top, dt):
+    m = _vertex_mass(points, cells)
+    r = m[top].sum() / m[~top].sum()
+    p0 = m[top].sum() * V0
+    v = [(b - a) / dt for a, b in zip(frames, frames[1:])]  # implicit Euler's velocities
+    px = np.array([m @ w[:, 0] for w in v])
+    assert np.abs(px - p0).max() < 1e-12 * p0  # horizontal momentum: round-off
+    vt = np.array([m[top] @ w[top, 0] for w in v]) / m[top].sum()
+    vb = np.array([m[~top] @ w[~top, 0] for w in v]) / m[~top].sum()
+    sliding = np.flatnonzero(vt - vb > (1 + r) * MU * G * dt)
+    assert len(sliding) >= 5
+    for w, w0, a in ((vt, V0, -MU * G), (vb, 0.0, r * MU * G)):
+        assert np.diff(np.r_[w0, w])[sliding].mean() == pytest.approx(a * dt, rel=0.01)
+        assert np.abs(w[sliding] - (w0 + a * dt * (sliding + 1))).max() < 0.01 * V0
+    common = V0 * r / (1 + r)
+    assert vt[-1] == pytest.approx(common, rel=0.01)
+    assert vb[-1] == pytest.approx(common, rel=0.01)
+    assert crossed_frames(points, cells, frames) == []
+
+
+def test_free_sheets_exchange_momentum_by_friction(tmp_path, monkeypatch):
+    """Reduced (2 cm elements, dt = 5 ms, 20 steps): the top sheet thrown on a free sheet on
+    frictionless ground. Horizontal momentum equals m_top v0 at every step to 1e-12; while
+    they slide the top loses mu g dt and the bottom gains mu g dt m_top / m_bottom per step
+    (1 % on average; the velocities within 1 % of v0 of those lines); both end at v0 m_top / (m_top + m_bottom) (1 %); no crossing."""
+    points, cells, frames, top = _slide_on_free_sheet(tmp_path, monkeypatch, 0.02, 0.005,
+                                                      1e-3, 20)
+    _check_free_slide(points, cells, frames, top, 0.005)
