@@ -211,3 +211,54 @@ def test_free_sheets_exchange_momentum_by_friction(tmp_path, monkeypatch):
     points, cells, frames, top = _slide_on_free_sheet(tmp_path, monkeypatch, 0.02, 0.005,
                                                       1e-3, 20)
     _check_free_slide(points, cells, frames, top, 0.005)
+
+
+def _print_measurements() -> None:
+    """The numbers of docs/cloth.md's table (the default runs and the slow one)."""
+    import tempfile
+    from pathlib import Path
+
+    import fem_anim.simulation.loop as loop
+
+    for h, dt, epsv, steps in ((0.02, 0.005, 1e-3, 28), (0.01, 0.001, 1e-4, 120)):
+        x, points, cells, frames, top = _slide_on_held_sheet(Path(tempfile.mkdtemp()), h, dt,
+                                                             epsv, steps)
+        v = np.diff(x) / dt
+        sliding = np.flatnonzero(v > MU * G * dt)
+        line = V0 - MU * G * dt * (sliding + 1)
+        rec = _coulomb_recurrence(V0, MU * G, dt, len(x) - 1)[-1]
+        stop = V0 ** 2 / (2 * MU * G)
+        gap = min((points[top, 2] + u[top, 2]).min() for u in frames)
+        print(f"held, h = {h}, dt = {dt}: deceleration "
+              f"{-np.diff(np.r_[V0, v])[sliding].mean() / (MU * G * dt):.5f} mu g, "
+              f"max |v - line| {np.abs(v[sliding] - line).max() / V0:.2e} v0, stop "
+              f"{x[-1]:.6f} m, recurrence {rec:.6f} ({x[-1] / rec - 1:+.4f}), continuum "
+              f"{stop:.6f} ({x[-1] / stop - 1:+.4f}), lowest top vertex t + "
+              f"{(gap - T) / DHAT:.3f} d_hat")
+
+    class Patch:
+        def setattr(self, obj, name, value):
+            self.undo = (obj, name, getattr(obj, name))
+            setattr(obj, name, value)
+
+    patch, dt = Patch(), 0.005
+    points, cells, frames, top = _slide_on_free_sheet(Path(tempfile.mkdtemp()), patch, 0.02,
+                                                      dt, 1e-3, 20)
+    setattr(*patch.undo)
+    m = _vertex_mass(points, cells)
+    r = m[top].sum() / m[~top].sum()
+    v = [(b - a) / dt for a, b in zip(frames, frames[1:])]
+    px = np.array([m @ w[:, 0] for w in v])
+    vt = np.array([m[top] @ w[top, 0] for w in v]) / m[top].sum()
+    vb = np.array([m[~top] @ w[~top, 0] for w in v]) / m[~top].sum()
+    sliding = np.flatnonzero(vt - vb > (1 + r) * MU * G * dt)
+    common = V0 * r / (1 + r)
+    print(f"free, m_top / m_bottom = {r:.6f}: momentum error "
+          f"{np.abs(px / (m[top].sum() * V0) - 1).max():.2e}, top "
+          f"{-np.diff(np.r_[V0, vt])[sliding].mean() / (MU * G * dt):.5f} mu g, bottom "
+          f"{np.diff(np.r_[0.0, vb])[sliding].mean() / (r * MU * G * dt):.5f} r mu g, end "
+          f"{vt[-1] / common:.6f} and {vb[-1] / common:.6f} of the common velocity")
+
+
+if __name__ == "__main__":
+    _print_measurements()

@@ -1237,6 +1237,15 @@ MUTATIONS: list[Mutation] = [
              "check_one_body(points, triangles, source)",
              ("tests/test_cloth_friction.py::test_free_sheets_exchange_momentum_by_friction",),
              "a shell surface of two layers of cloth is refused as two bodies"),
+    Mutation("cloth-cost-solve-without-factor", "fem_anim/bench/cloth_cost.py",
+             '"solve_s": mean("factor_s") + mean("linear_solve_s")',
+             '"solve_s": mean("linear_solve_s")',
+             ("tests/test_cloth_cost.py::test_cloth_cost_table_adds_up",),
+             "the cloth bench's split leaves the factorisations out of the step"),
+    Mutation("cloth-cost-error-against-itself", "fem_anim/bench/cloth_cost.py",
+             'one["u"] - exact["u"]', 'one["u"] - one["u"]',
+             ("tests/test_cloth_cost.py::test_cloth_cost_table_adds_up",),
+             "the one-step run's error is measured against itself"),
 ]
 
 
