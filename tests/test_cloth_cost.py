@@ -39,3 +39,19 @@ def test_cloth_cost_bad_arguments_are_one_line(tmp_path, capsys):
     assert main(["--vertices", "50", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("fem-anim: error:") for line in err), err
+
+
+def test_cloth_cost_refuses_a_users_file_before_measuring(tmp_path, capsys, monkeypatch):
+    """A cloth_cost.md that fem_anim did not write is refused (one line, exit 2) before any
+    run starts, and left as it was."""
+    from fem_anim.bench import cloth_cost
+
+    def never(*args, **kwargs):
+        raise AssertionError("measured before checking the output folder")
+
+    monkeypatch.setattr(cloth_cost, "cost_table", never)
+    (tmp_path / "cloth_cost.md").write_text("the user's own")
+    assert cloth_cost.main(["--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "was not written by fem-anim" in err[0], err
+    assert (tmp_path / "cloth_cost.md").read_text() == "the user's own"
