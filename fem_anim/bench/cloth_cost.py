@@ -17,12 +17,14 @@ For each vertex count N (default 2 500 and 10 000), one after the other in one p
 * **solid, exact**: the default scene (``fem_anim/default_scene.toml``, a hanging
   neo-Hookean beam, Newmark) with the element size that gives about N vertices.
 
-Each case's time per step is the mean of ``stats.csv``'s ``step_wall_s`` over its steps 2..n
-(the first pays for the matrix's pattern), split by its columns: ``assembly_s`` (the UFL
-forms' residuals, Hessians and objectives, and ipctk's barrier inside them),
-``contact_s`` (all ipctk time: detection, barrier, continuous collision detection),
-``factor_s + linear_solve_s`` and the rest; Newton iterations per step from
-``newton_its``. Then one Hessian and one gradient assembly of the membrane alone, the
+Each case's time per time step (of the scene's dt) is ``summary.json``'s stepping time over
+the number of time steps (the first step, which pays for the matrix's pattern, and the
+adaptive stepper's failed tries included), split by the sums of ``stats.csv``'s columns
+over its rows (the accepted substeps): ``assembly_s`` (the UFL forms' residuals,
+Hessians and objectives, and ipctk's barrier inside them), ``contact_s`` (all ipctk time:
+detection, barrier, continuous collision detection: part of the assembly and of the
+rest), ``factor_s + linear_solve_s``, the rows' rest and the failed tries' time (the
+stepping time the rows do not hold; ``summary.json`` keeps microseconds); Newton iterations per time step from ``newton_its``. Then one Hessian and one gradient assembly of the membrane alone, the
 bending alone and the step's whole UFL Hessian (with mass and obstacles) are timed on the
 cloth's mesh (the fastest of five), to split the assembly between the two energies.
 
@@ -98,31 +100,40 @@ def solid_scene(vertices: int, steps: int):
 
 
 def step_costs(scene, out: Path) -> dict:
-    """Run ``scene`` and average its ``stats.csv`` over steps 2..n.
+    """Run ``scene`` and take its cost per time step (of the scene's dt) from its files.
 
     Returns:
-        ``vertices``, ``cells``, ``steps``, mean seconds per step (``step_s``,
-        ``assembly_s``, ``contact_s``, ``solve_s`` = factor + linear solve, ``other_s``),
-        Newton iterations per step (mean and max), the largest contact pair count, the
-        run's wall seconds and the final displacement (``u``, not written to JSON).
+        ``vertices``, ``cells``, ``steps`` (time steps), ``substeps`` (accepted ones:
+        ``stats.csv``'s rows; the adaptive stepper halves dt after a failed try) and
+        ``retries``; per time step: ``step_s`` (``summary.json``'s stepping time, failed
+        tries included), the rows' ``rows_s`` (their ``step_wall_s``), ``assembly_s``,
+        ``contact_s``, ``solve_s`` (factor + linear solve) and ``other_s`` (the rows'
+        rest), ``newton_its``; ``newton_its_max`` of one row, the largest contact pair
+        count, the run's wall seconds and the final displacement (``u``, not written to
+        JSON).
     """
     import fem_anim
 
     start = time.perf_counter()
     with fem_anim.run(scene, out) as run:
-        rows = [r for r in run.stats if int(r["step"]) >= 2]
+        rows = run.stats
         u = run.displacement(len(run.times) - 1)
         points, cells = run.points, run.cells
+        summary = run.summary
     wall = time.perf_counter() - start
+    steps = int(scene["time"]["steps"])
 
-    def mean(key):
-        return float(np.mean([float(r[key]) for r in rows]))
+    def per_step(key):
+        return float(np.sum([float(r[key]) for r in rows])) / steps
     its = [int(r["newton_its"]) for r in rows]
-    return {"vertices": len(points), "cells": len(cells), "steps": len(rows) + 1,
-            "step_s": mean("step_wall_s"), "assembly_s": mean("assembly_s"),
-            "contact_s": mean("contact_s"),
-            "solve_s": mean("factor_s") + mean("linear_solve_s"), "other_s": mean("other_s"),
-            "newton_its": float(np.mean(its)), "newton_its_max": max(its),
+    return {"vertices": len(points), "cells": len(cells), "steps": steps,
+            "substeps": len(rows), "retries": int(summary["retries"]),
+            "step_s": float(summary["wall"]["stepping_s"]) / steps,
+            "rows_s": per_step("step_wall_s"), "assembly_s": per_step("assembly_s"),
+            "contact_s": per_step("contact_s"),
+            "solve_s": per_step("factor_s") + per_step("linear_solve_s"),
+            "other_s": per_step("other_s"), "newton_its": per_step("newton_its"),
+            "newton_its_max": max(its),
             "pairs_max": max(int(r["contact_pairs"]) for r in rows), "run_s": wall, "u": u}
 
 
@@ -186,17 +197,18 @@ def cost_table(out: Path, vertices=VERTICES, steps: int = 6) -> str:
                 results.append({"case": label, "target_vertices": n, **row,
                                 **({"forms": split} if row is exact else {})})
             print(f"{n}: done", flush=True)
-    lines = [f"Cloth drape (exact, one Newton step) and the default solid, {steps} steps each "
-             "(means over steps 2..n; one process, one after the other)", "",
+    lines = [f"Cloth drape (exact, one Newton step) and the default solid, {steps} time steps "
+             "each, one process, one after the other; seconds per time step", "",
              "| case | vertices | cells | s/step | assembly | ipctk | factor + solve | other "
-             "| Newton its/step (max) | us/step/vertex | end error |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| failed tries | substeps (retries) | Newton its/step (max) | us/step/vertex "
+             "| end error |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         error = f"{r['error']:.2e}" if "error" in r else ""
         lines.append(
             f"| {r['case']} | {r['vertices']} | {r['cells']} | {r['step_s']:.3f} | "
             f"{r['assembly_s']:.3f} | {r['contact_s']:.3f} | {r['solve_s']:.3f} | "
-            f"{r['other_s']:.3f} | {r['newton_its']:.1f} ({r['newton_its_max']}) | "
+            f"{r['other_s']:.3f} | {max(r['step_s'] - r['rows_s'], 0.0):.3f} | {r['substeps']} "
+            f"({r['retries']}) | {r['newton_its']:.1f} ({r['newton_its_max']}) | "
             f"{1e6 * r['step_s'] / r['vertices']:.0f} | {error} |")
     lines += ["", "One Hessian + gradient assembly on the cloth's mesh (fastest of 5):", "",
               "| vertices | membrane (s) | bending (s) | whole step's UFL forms (s) |",
