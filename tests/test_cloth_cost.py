@@ -11,7 +11,8 @@ import pytest
 
 def test_cloth_cost_table_adds_up(tmp_path, capsys):
     """225 vertices, 5 steps (the sheet reaches the ball): each row's time per step is
-    assembly + factor and solve + the rest (stats.csv's split of the step's wall time); the exact cloth iterates Newton, the
+    assembly + factor and solve + the rest (stats.csv's split of the step's wall time); the
+    exact cloth iterates Newton, the
     one-step run takes exactly one step per step and ends away from the exact run (a
     positive error), and the markdown table shows the JSON's numbers."""
     from fem_anim.bench.cloth_cost import CASES, main

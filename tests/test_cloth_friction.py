@@ -207,7 +207,8 @@ def test_free_sheets_exchange_momentum_by_friction(tmp_path, monkeypatch):
     """Reduced (2 cm elements, dt = 5 ms, 20 steps): the top sheet thrown on a free sheet on
     frictionless ground. Horizontal momentum equals m_top v0 at every step to 1e-12; while
     they slide the top loses mu g dt and the bottom gains mu g dt m_top / m_bottom per step
-    (1 % on average; the velocities within 1 % of v0 of those lines); both end at v0 m_top / (m_top + m_bottom) (1 %); no crossing."""
+    (1 % on average; the velocities within 1 % of v0 of those lines); both end at
+    v0 m_top / (m_top + m_bottom) (1 %); no crossing."""
     points, cells, frames, top = _slide_on_free_sheet(tmp_path, monkeypatch, 0.02, 0.005,
                                                       1e-3, 20)
     _check_free_slide(points, cells, frames, top, 0.005)
@@ -262,3 +263,59 @@ def _print_measurements() -> None:
 
 if __name__ == "__main__":
     _print_measurements()
+
+
+@pytest.mark.mpi
+def test_held_slide_on_two_ranks_equals_serial(tmp_path):
+    """The sheet thrown on a held sheet (two pieces, IPC friction) for 12 steps on 2 ranks:
+    every step's energies and the final displacement equal the serial run's to 1e-8."""
+    import meshio
+
+    from conftest import run_on_one_and_more_ranks
+    from test_cli import read_stats
+
+    _two_sheets(tmp_path / "layers.obj", [0.2, 0.1], [-0.05, -0.05, 0.0], 0.02)
+    pin = [{"min": [-0.06, -0.06, -0.001], "max": [0.16, 0.06, 0.001]}]
+    settled = _settled(tmp_path, _scene(tmp_path / "layers.obj", 0.005, 20, 1e-3, pin=pin))
+    scene = tmp_path / "slide.toml"
+    scene.write_text(f"""name = "slide"
+[mesh]
+shape = "file"
+file = "{settled}"
+[shell]
+thickness = {T}
+[material]
+model = "stvk"
+youngs_modulus = {E}
+poisson_ratio = 0.3
+density = {RHO}
+mass = "lumped"
+[time]
+integrator = "implicit_euler"
+dt = 0.005
+steps = 12
+[gravity]
+acceleration = [0.0, 0.0, -{G}]
+[initial]
+velocity = [{V0}, 0.0, 0.0]
+[contact]
+dhat = {DHAT}
+friction = {MU}
+epsv = 1e-3
+stiffness = 1e4
+[[pin]]
+min = [-0.06, -0.06, -0.001]
+max = [0.16, 0.06, 0.001]
+[output]
+render = false
+""")
+    outs = run_on_one_and_more_ranks(scene, tmp_path)
+    a, b = read_stats(outs[1] / "stats.csv"), read_stats(outs[2] / "stats.csv")
+    assert len(a) == len(b) == 12 and min(row["contact_pairs"] for row in a) > 0
+    for ra, rb in zip(a, b):
+        for key in ("kinetic", "elastic", "gravity", "contact"):
+            assert rb[key] == pytest.approx(ra[key], rel=1e-8, abs=1e-14), (ra["step"], key)
+    ua = meshio.read(outs[1] / "final.vtu").point_data["displacement"]
+    ub = meshio.read(outs[2] / "final.vtu").point_data["displacement"]
+    assert np.linalg.norm(ub - ua) <= 1e-8 * np.linalg.norm(ua)
+    assert ua[:, 0].max() > 0.01  # the top sheet slid (1.1 cm in these 12 steps)

@@ -108,9 +108,9 @@ def step_costs(scene, out: Path) -> dict:
         ``stats.csv``'s rows; the adaptive stepper halves dt after a failed try) and
         ``retries``; per time step, summed over the rows: ``step_s`` (their
         ``step_wall_s``), ``assembly_s``, ``contact_s``, ``solve_s`` (factor + linear
-        solve), ``other_s`` and ``newton_its``; ``newton_its_max`` of one row, the largest contact pair
-        count, the run's wall seconds and the final displacement (``u``, not written to
-        JSON).
+        solve), ``other_s`` and ``newton_its``; ``newton_its_max`` of one row, the largest
+        contact pair count, the run's wall seconds and the final displacement (``u``, not
+        written to JSON).
     """
     import fem_anim
 
