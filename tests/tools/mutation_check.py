@@ -1246,6 +1246,11 @@ MUTATIONS: list[Mutation] = [
              'one["u"] - exact["u"]', 'one["u"] - one["u"]',
              ("tests/test_cloth_cost.py::test_cloth_cost_table_adds_up",),
              "the one-step run's error is measured against itself"),
+    Mutation("cloth-friction-rank-dependent", "fem_anim/contact/ipc.py",
+             '                              float(self.cfg["friction"]))',
+             '                              float(self.cfg["friction"]) * (1 + self.comm.rank))',
+             ("tests/test_cloth_friction.py::test_held_slide_on_two_ranks_equals_serial",),
+             "the friction pairs a rank owns feel mu times its rank plus one (2 ranks differ)"),
 ]
 
 
