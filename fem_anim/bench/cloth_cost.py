@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.errors import FemAnimError
 from fem_anim.output.products import check_may_write, write_product
 
 __all__ = ["CASES", "VERTICES", "cloth_scene", "cost_table", "form_split", "main",
@@ -224,7 +224,7 @@ def cost_table(out: Path, vertices=VERTICES, steps: int = 6) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from fem_anim.console import OneLineParser, print_error
+    from fem_anim.console import OneLineParser, exit_status
     from fem_anim.petsc_options import init_petsc
 
     init_petsc([])
@@ -234,7 +234,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="vertex counts, N,N,... (each at least 100)")
     p.add_argument("--steps", type=int, default=6)
     p.add_argument("--out", default="demos/results/cloth_cost")
-    try:
+    args = None
+
+    def run() -> int:
+        nonlocal args
         args = p.parse_args(list(sys.argv[1:] if argv is None else argv))
         try:
             vertices = tuple(int(v) for v in args.vertices.split(","))
@@ -248,12 +251,8 @@ def main(argv: list[str] | None = None) -> int:
         check_may_write(out, ["cloth_cost.md", "cloth_cost.json"])
         print(cost_table(out, vertices, args.steps))
         return 0
-    except FemAnimError as err:
-        print_error(str(err))
-        return 2
-    except OSError as err:
-        print_error(describe_os_error(err, args.out))
-        return 2
+
+    return exit_status(run, lambda: args.out)
 
 
 if __name__ == "__main__":
