@@ -154,6 +154,45 @@ def test_sheet_thrown_on_a_held_sheet_converges_to_coulomb_distance(tmp_path):
     _check_held_slide(x, points, cells, frames, top, dt, 0.015)
 
 
+def _slope_run(tmp_path, slope, dt, epsv):
+    """The held pair on a slope: the top sheet's velocities along x (mass weighted), the
+    acceleration g (sin a - mu cos a) of Coulomb's sliding, and the frames."""
+    cos, sin = 1 / np.hypot(1, slope), slope / np.hypot(1, slope)
+    _two_sheets(tmp_path / "layers.obj", [0.2, 0.1], [-0.05, -0.05, 0.0], 0.02)
+    pin = [{"min": [-0.06, -0.06, -0.001], "max": [0.16, 0.06, 0.001]}]
+    settled = _settled(tmp_path, _scene(tmp_path / "layers.obj", dt, 20, epsv, pin=pin,
+                                        gravity={"acceleration": [0.0, 0.0, -G * cos]}))
+    scene = _scene(settled, dt, 24, epsv, pin=pin,
+                   gravity={"acceleration": [G * sin, 0.0, -G * cos]})
+    points, cells, frames = _frames(scene, tmp_path / "slope")
+    top = points[:, 2] > T / 2
+    m = _vertex_mass(points, cells)[top]
+    v = np.diff([m @ u[top, 0] / m.sum() for u in frames]) / dt
+    return v, G * (sin - MU * cos), points, cells, frames
+
+
+@pytest.mark.parametrize("slope", [0.5, 0.2])
+def test_sheet_on_a_held_sheet_on_a_slope(tmp_path, slope):
+    """The held pair tilted (gravity g (sin a, 0, -cos a), tan a = ``slope``), settled under
+    the normal part g cos a: steeper than mu (0.5), the top sheet slides down from rest at
+    g (sin a - mu cos a) (1 % on average; its velocity within 1 % of the line a t); less
+    steep (0.2), static friction holds it up to IPC's smoothing: below eps_v the friction is
+    mu N f1(v / eps_v), f1(y) = 2 y - y^2, so the sheet creeps at the speed where that holds
+    the weight's tangential part, v = eps_v (1 - sqrt(1 - tan a / mu)) (2 %, after its first
+    steps), never faster than eps_v."""
+    dt, epsv = 0.005, 1e-3
+    v, a, points, cells, frames = _slope_run(tmp_path, slope, dt, epsv)
+    if a > 0:
+        assert np.diff(np.r_[0.0, v]).mean() == pytest.approx(a * dt, rel=0.01)
+        t = dt * np.arange(1, len(v) + 1)
+        assert np.abs(v - a * t).max() < 0.01 * a * t[-1]
+    else:
+        assert np.abs(v).max() < epsv
+        creep = epsv * (1 - np.sqrt(1 - slope / MU))
+        assert np.abs(v[4:] / creep - 1).max() < 0.02
+    assert crossed_frames(points, cells, frames) == []
+
+
 def _slide_on_free_sheet(tmp_path, monkeypatch, h, dt, epsv, steps):
     """The top sheet thrown at V0 on a free sheet lying on frictionless ground.
 
@@ -236,6 +275,16 @@ def _print_measurements() -> None:
               f"{x[-1]:.6f} m, recurrence {rec:.6f} ({x[-1] / rec - 1:+.4f}), continuum "
               f"{stop:.6f} ({x[-1] / stop - 1:+.4f}), lowest top vertex t + "
               f"{(gap - T) / DHAT:.3f} d_hat")
+
+    for slope in (0.5, 0.2):
+        v, a, *_ = _slope_run(Path(tempfile.mkdtemp()), slope, 0.005, 1e-3)
+        if a > 0:
+            print(f"slope {slope}: acceleration {np.diff(np.r_[0.0, v]).mean() / 0.005:.6f}, "
+                  f"g (sin a - mu cos a) = {a:.6f}")
+        else:
+            creep = 1e-3 * (1 - np.sqrt(1 - slope / MU))
+            print(f"slope {slope}: creep {v[4:].min():.4e} to {v[4:].max():.4e} m/s, "
+                  f"eps_v (1 - sqrt(1 - tan a / mu)) = {creep:.4e}")
 
     class Patch:
         def setattr(self, obj, name, value):

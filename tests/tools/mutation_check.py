@@ -1251,6 +1251,12 @@ MUTATIONS: list[Mutation] = [
              '                              float(self.cfg["friction"]) * (1 + self.comm.rank))',
              ("tests/test_cloth_friction.py::test_held_slide_on_two_ranks_equals_serial",),
              "the friction pairs a rank owns feel mu times its rank plus one (2 ranks differ)"),
+    Mutation("cloth-friction-epsv-without-dt", "fem_anim/contact/ipc.py",
+             'ipctk.FrictionPotential(float(self.cfg["epsv"]) * h)',
+             'ipctk.FrictionPotential(float(self.cfg["epsv"]))',
+             ("tests/test_cloth_friction.py::test_sheet_on_a_held_sheet_on_a_slope[0.2]",),
+             "the friction's smoothing width is eps_v (m/s) taken as a displacement, without "
+             "dt: static friction creeps dt^-1 times faster"),
 ]
 
 
