@@ -14,8 +14,8 @@ plots, and writes
   are whole hundredths of a second and viewers slow down shorter ones: faster runs keep
   every k-th frame),
 * ``animation.mp4`` (H.264 through the ffmpeg binary of imageio-ffmpeg, x264's
-  :data:`X264_PRESET` preset: on rendered frames it takes under half the default preset's
-  time for a file of about the same size),
+  :data:`X264_PRESET` preset: on rendered frames it takes less time than the default
+  preset for a file of about the same size, measured in docs/pictures.md),
 * ``final.png`` (the last frame) and the plots of :mod:`fem_anim.render.plots`.
 
 Everything is written into a fresh staging folder inside ``OUTDIR`` and moved into place

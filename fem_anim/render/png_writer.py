@@ -4,9 +4,9 @@ A rendered frame is large areas of one colour; zlib compresses its rows well wit
 per-row prediction filters, which Pillow chooses adaptively for every row and which cost
 most of its time. :func:`write_png` writes an 8-bit RGB PNG (PNG specification, ISO/IEC
 15948: signature, ``IHDR``, one ``IDAT`` of filter-type-0 rows, ``IEND``), any reader's
-format, in about a third of Pillow's time. zlib's fastest level (1) is used: on rendered
-frames it halves the time of its default level (6) for files about 1.4 times larger
-(docs/pictures.md).
+format, faster than Pillow. zlib's fastest level (1) is used: on rendered frames it takes
+less time than its default level (6) for somewhat larger files (measured in
+docs/pictures.md).
 """
 
 from __future__ import annotations
