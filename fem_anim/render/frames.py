@@ -7,8 +7,9 @@ Without a display, VTK's EGL render window is selected (no X server needed).
 counter from the scene's ``[render]`` table) and renders frame after frame into it by
 updating the surface's positions, normals and colours in place and moving the camera to
 the frame's :class:`~fem_anim.render.camera.Shot`; obstacles that would stand between the
-camera and the bodies are hidden in that frame. :func:`render_frame` and
-:func:`render_vtu` make one picture of one state.
+camera and the bodies are hidden in that frame, and the planes' tiles, drawn unlit, take the
+colour the lights give them from that camera (:func:`~fem_anim.render.scenery.plane_shade`).
+:func:`render_frame` and :func:`render_vtu` make one picture of one state.
 
 Only the rendering process imports this module (:mod:`fem_anim.render.process`): the VTK
 wheel's C++ runtime clashes with libraries DOLFINx loads.
