@@ -1,6 +1,6 @@
 #!/bin/bash
 # Side-by-side timing of `fem-anim render` (docs/pictures.md, "Speed"); the Python below says
-# how. Run from the repository root: bash docs/picture_scenes/render_bench.sh [REPS]
+# how. Run from the repository root: bash docs/picture_scenes/render_bench.sh [REPS | --frame]
 exec .venv/bin/python - "$@" <<'PY'
 """`fem-anim render` of the same run directories by three renderers, alternating, on one
 machine at one time: BASE (the renderer when issue 29 was filed, commit fb47c9d), MAIN (after
@@ -20,6 +20,12 @@ so no checkout's fem_anim is picked up from the working directory. Prints, per s
 renderer, every repetition's wall-clock seconds and CPU seconds (user + system of the
 command and every process it started: the render process, its threads, ffmpeg), then the
 medians and the ratios of the medians to BASE and to MAIN.
+
+With ``--frame`` instead: where a frame's CPU time goes in this checkout, on the pile's 61
+frames in this process (CPU time of all its threads; ffmpeg's as a child's): rendering with
+the tiles shaded as now, with VTK lighting them, and with no obstacle; the PNG at zlib's
+levels 1 and 6 and its mean size; ffmpeg (libx264 at the default preset and at
+``veryfast``, ``quality=7``) a frame and the file's size; the GIF per frame it keeps.
 """
 
 from __future__ import annotations
@@ -102,7 +108,75 @@ def timed(python: str, directory: Path) -> tuple[float, float]:
     return wall, cpu
 
 
+def frame_costs(run: Path) -> None:
+    """Print the CPU milliseconds a frame of ``run`` takes in each stage (see above)."""
+    import os
+
+    import imageio_ffmpeg
+    import numpy as np
+
+    from fem_anim.render import animation, png_writer
+    from fem_anim.render.camera import plan_shots
+    from fem_anim.render.frames import FrameRenderer, scalar_bar_reserve, stage_of
+    from fem_anim.render.outer_surface import outer_faces
+    from fem_anim.render.render_defaults import resolve_settings
+
+    frames = animation.read_run(run)
+    scene = animation._scene(run)
+    settings = resolve_settings(scene.get("render", {}), frames.cells, scene)
+    values = animation.frame_values(frames, settings["color_by"])
+    used = np.unique(outer_faces(frames.points, frames.cells)[0])
+    surfaces = [frames.points[used] + u[used] for u in frames.displacement]
+    shots = plan_shots(surfaces, settings, 3, scalar_bar_reserve(settings))
+    n = len(shots)
+    images = []
+    for label, obstacles, shaded in (("tiles shaded (now)", scene.get("obstacle", []), True),
+                                     ("tiles lit by VTK", scene.get("obstacle", []), False),
+                                     ("no obstacle", [], True)):
+        renderer = FrameRenderer(frames.points, frames.cells, settings, (0.0, 1.0),
+                                 stage_of(surfaces), obstacles, shaded_tiles=shaded)
+        renderer.render(frames.displacement[0], values[0], "", shots[0])  # shaders built
+        start = time.process_time()
+        shown = [renderer.render(frames.displacement[k], values[k], f"frame {k}", shots[k])
+                 for k in range(n)]
+        print(f"render, {label}: {1e3 * (time.process_time() - start) / n:.1f} ms", flush=True)
+        images = images or shown
+        renderer.close()
+    for level in (1, 6):
+        png_writer.ZLIB_LEVEL = level
+        start = time.process_time()
+        size = sum(len(png_writer.encode_png(image)) for image in images)
+        print(f"PNG, zlib level {level}: {1e3 * (time.process_time() - start) / n:.1f} ms, "
+              f"{size / n / 1e3:.0f} kB", flush=True)
+    for preset in (None, "veryfast"):
+        path = WORK / "preset.mp4"
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.process_time()
+        writer = imageio_ffmpeg.write_frames(
+            str(path), (images[0].shape[1], images[0].shape[0]), fps=60, codec="libx264",
+            pix_fmt_out="yuv420p", quality=7, macro_block_size=2, ffmpeg_log_level="error",
+            output_params=["-preset", preset] if preset else [])
+        writer.send(None)
+        for image in images:
+            writer.send(np.ascontiguousarray(image))
+        writer.close()
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+               + time.process_time() - start)
+        print(f"MP4, x264 preset {preset or 'default (medium)'}: {1e3 * cpu / n:.1f} ms, "
+              f"{os.path.getsize(path) / 1e3:.0f} kB", flush=True)
+    kept = images[::animation.gif_stride(60.0)]
+    start = time.process_time()
+    animation._write_gif(WORK / "frame_costs.gif", kept, 1000.0 / 30)
+    print(f"GIF: {1e3 * (time.process_time() - start) / len(kept):.1f} ms a kept frame "
+          f"({len(kept)} of {n})", flush=True)
+
+
 def main() -> None:
+    if sys.argv[1:] == ["--frame"]:
+        WORK.mkdir(exist_ok=True)
+        frame_costs(simulate("pile", 60, False))
+        return
     reps = int(sys.argv[1]) if len(sys.argv) > 1 else 3
     WORK.mkdir(exist_ok=True)
     names = ["BASE", "MAIN", "NOW"]
