@@ -1225,6 +1225,25 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_command_safety.py::test_a_signal_to_the_command_after_its_renderer_"
               "finished_says_so",),
              "Ctrl-C after the renderer finished says nothing was installed"),
+    Mutation("render-tile-shade-one-sided", "fem_anim/render/scenery.py",
+             "        normal = -normal  # the side the camera sees",
+             "        pass  # the side the camera sees",
+             ("tests/test_render_speed.py::test_shaded_tiles_equal_vtks_lit_tiles_3d",
+              "tests/test_render_speed.py::test_plane_shade_front_and_back"),
+             "a tile seen from its back shaded as if lit from behind (ambient only), not as "
+             "VTK's two-sided lighting does"),
+    Mutation("render-tile-shade-stale", "fem_anim/render/frames.py",
+             "        self._shade_tiles()\n",
+             "        self._shade_tiles() if not hasattr(self, '_shaded') else None\n"
+             "        self._shaded = True\n",
+             ("tests/test_render_speed.py::test_a_frame_after_others_equals_a_fresh_renderers",),
+             "the tiles keep the shade of the first frame's camera when the camera turns"),
+    Mutation("render-tile-unshaded", "fem_anim/render/frames.py",
+             "        self._shade_tiles()\n        self.plotter.render()",
+             "        self.plotter.render()",
+             ("tests/test_render_speed.py::test_shaded_tiles_equal_vtks_lit_tiles_3d",
+              "tests/test_render_speed.py::test_shaded_tiles_equal_vtks_lit_tiles_2d"),
+             "the unlit tiles drawn in their plain colour, not the lit one"),
 ]
 
 
