@@ -38,6 +38,8 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "obstacle_mesh": "scenery",
     "visible_obstacles": "scenery",
     "add_lights": "scenery",
+    "plane_shade": "scenery",
+    "tile_plane": "scenery",
     "FIELD_LABELS": "frames",
     "FrameRenderer": "frames",
     "body_labels": "frames",

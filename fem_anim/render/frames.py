@@ -7,8 +7,9 @@ Without a display, VTK's EGL render window is selected (no X server needed).
 counter from the scene's ``[render]`` table) and renders frame after frame into it by
 updating the surface's positions, normals and colours in place and moving the camera to
 the frame's :class:`~fem_anim.render.camera.Shot`; obstacles that would stand between the
-camera and the bodies are hidden in that frame. :func:`render_frame` and
-:func:`render_vtu` make one picture of one state.
+camera and the bodies are hidden in that frame, and the planes' tiles, drawn unlit, take the
+colour the lights give them from that camera (:func:`~fem_anim.render.scenery.plane_shade`).
+:func:`render_frame` and :func:`render_vtu` make one picture of one state.
 
 Only the rendering process imports this module (:mod:`fem_anim.render.process`): the VTK
 wheel's C++ runtime clashes with libraries DOLFINx loads.
@@ -25,8 +26,8 @@ import numpy as np
 from fem_anim.mesh.connectivity import cell_components
 from fem_anim.render.camera import Shot, plan_shots
 from fem_anim.render.render_defaults import resolve_settings
-from fem_anim.render.scenery import OBSTACLE_COLOR, add_lights, obstacle_mesh, \
-    visible_obstacles
+from fem_anim.render.scenery import OBSTACLE_AMBIENT, OBSTACLE_COLOR, OBSTACLE_DIFFUSE, \
+    add_lights, obstacle_mesh, plane_shade, tile_plane, visible_obstacles
 from fem_anim.render.outer_surface import outer_faces
 
 __all__ = ["FrameRenderer", "FIELD_LABELS", "CREASE_ANGLE", "SCALAR_BAR_HEIGHT", "body_labels",
@@ -70,10 +71,15 @@ class FrameRenderer:
         stage: The bodies' centre (3,) and largest extent (m) over the run: where the
             obstacles' tiles go and how large they are.
         obstacles: The scene's ``[[obstacle]]`` tables (drawn if ``settings["obstacles"]``).
+        shaded_tiles: Draw the planes' tiles unlit in the colour the lights give them
+            (:func:`~fem_anim.render.scenery.plane_shade`, set again whenever the camera
+            moves): the same pixels as VTK's lighting at a fraction of the cost. Without
+            shadows only (a shadow falls on a lit tile); ``False`` lets VTK light them.
     """
 
     def __init__(self, points: np.ndarray, cells: np.ndarray, settings: dict,
-                 clim: tuple[float, float], stage: tuple[np.ndarray, float], obstacles=()):
+                 clim: tuple[float, float], stage: tuple[np.ndarray, float], obstacles=(),
+                 shaded_tiles: bool = True):
         import matplotlib.colors
 
         pv = _pyvista()
@@ -125,9 +131,19 @@ class FrameRenderer:
         centre, size = stage
         self._obstacle_actors = [
             plotter.add_mesh(obstacle_mesh(pv, o, np.asarray(centre, float), size, self.dim),
-                             color=OBSTACLE_COLOR, ambient=0.3, diffuse=0.7)
+                             color=OBSTACLE_COLOR, ambient=OBSTACLE_AMBIENT,
+                             diffuse=OBSTACLE_DIFFUSE)
             for o in self.obstacles]
-        if settings["shadows"] and self.dim == 3:
+        shadows = settings["shadows"] and self.dim == 3
+        self._tiles = [(actor.GetProperty(), *tile_plane(o, self.dim))
+                       for actor, o in zip(self._obstacle_actors, self.obstacles)
+                       if o["type"] == "plane" and shaded_tiles and not shadows]
+        self._tile_color = np.array(matplotlib.colors.to_rgb(OBSTACLE_COLOR))
+        for prop, _, _ in self._tiles:  # the colour, lit, comes in _shade_tiles
+            prop.LightingOff()
+            prop.SetAmbient(1.0)
+            prop.SetDiffuse(0.0)
+        if shadows:
             plotter.enable_shadows()
 
     def surface_points(self, displacement: np.ndarray) -> np.ndarray:
@@ -170,8 +186,17 @@ class FrameRenderer:
                     self.obstacles, np.asarray(shot.position), centre, self.dim)):
                 actor.SetVisibility(shown)
         self.text.SetInput(title or " ")
+        self._shade_tiles()
         self.plotter.render()
         return self.plotter.screenshot(return_img=True)
+
+    def _shade_tiles(self) -> None:
+        """Give each unlit tile the colour the lights give it from where the camera is."""
+        camera = self.plotter.camera
+        for prop, normal, point in self._tiles:
+            prop.SetAmbientColor(*plane_shade(normal, point, camera.position,
+                                              camera.focal_point, camera.up,
+                                              self._tile_color))
 
     def close(self) -> None:
         """Release the plotter and its render window."""

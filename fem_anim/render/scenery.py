@@ -11,18 +11,31 @@ Obstacles are drawn opaque: a translucent surface costs a depth-sorting pass per
 The lights are a key light from the upper left of the camera, a dimmer fill light from its
 right and an ambient term on every surface, all attached to the camera (camera lights), so
 a following camera keeps the same lighting.
+
+The lights are directional, so a plane's tile (one normal, no specular term) takes one
+colour all over: :func:`plane_shade` computes it as VTK's shader does (Phong's model with
+the normal turned towards the camera, as two-sided lighting does) and the renderer draws
+the tile unlit in that colour, which gives the same pixels without lighting every one of
+them each frame (tested against VTK's lit tile).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["TILE_SCALE", "OBSTACLE_COLOR", "obstacle_mesh", "visible_obstacles", "add_lights"]
+__all__ = ["TILE_SCALE", "OBSTACLE_COLOR", "OBSTACLE_AMBIENT", "OBSTACLE_DIFFUSE", "LIGHTS",
+           "obstacle_mesh", "visible_obstacles", "add_lights", "tile_plane", "plane_shade"]
 
 #: The side of a plane's tile over the bodies' largest extent.
 TILE_SCALE = 3.0
 #: Colour of the obstacles.
 OBSTACLE_COLOR = "#d4d4d4"
+#: The obstacles' ambient and diffuse coefficients (no specular term).
+OBSTACLE_AMBIENT, OBSTACLE_DIFFUSE = 0.3, 0.7
+#: The camera lights: position in camera-light coordinates (camera at (0, 0, 1) looking at
+#: the origin, y up; the light shines from there towards the origin) and intensity.
+LIGHTS = (((-0.8, 1.0, 1.0), 0.85),  # key light, upper left
+          ((1.0, -0.2, 0.8), 0.35))  # fill light, right
 
 
 def _pad3(a) -> np.ndarray:
@@ -106,8 +119,57 @@ def add_lights(pv, plotter) -> None:
         pv: The pyvista module.
         plotter: A plotter made with ``lighting="none"``.
     """
-    # camera-light coordinates: camera at (0, 0, 1) looking at the origin, y up
-    plotter.add_light(pv.Light(position=(-0.8, 1.0, 1.0), light_type="camera light",
-                               intensity=0.85))
-    plotter.add_light(pv.Light(position=(1.0, -0.2, 0.8), light_type="camera light",
-                               intensity=0.35))
+    for position, intensity in LIGHTS:
+        plotter.add_light(pv.Light(position=position, light_type="camera light",
+                                   intensity=intensity))
+
+
+def tile_plane(obstacle: dict, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The plane a plane obstacle's tile lies in: its unit normal and a point of it.
+
+    Args:
+        obstacle: A ``type = "plane"`` table.
+        dim: 2 or 3 (in 2D the tile is a band in the bodies' plane z = 0).
+
+    Returns:
+        ``(normal, point)``, both (3,).
+    """
+    if dim == 2:
+        return np.array([0.0, 0.0, 1.0]), np.zeros(3)
+    return _plane(obstacle)
+
+
+def plane_shade(normal: np.ndarray, point: np.ndarray, camera: np.ndarray,
+                focal_point: np.ndarray, view_up: np.ndarray, color: np.ndarray
+                ) -> np.ndarray:
+    """The colour :data:`LIGHTS` give a plane tile seen from a camera.
+
+    VTK's fragment shader for directional lights gives ``ka c + kd c sum_i I_i max(0,
+    n . l_i)`` (``ka``, ``kd`` :data:`OBSTACLE_AMBIENT`, :data:`OBSTACLE_DIFFUSE`; ``l_i``
+    the unit vector towards light ``i`` and ``n`` the normal in camera coordinates, ``n``
+    turned towards the camera as two-sided lighting does), clipped to [0, 1]. For a plane
+    every term is the same at every pixel.
+
+    Args:
+        normal: The tile's unit normal (3,) (either side).
+        point: A point of the tile's plane (3,).
+        camera: The camera position (3,).
+        focal_point: The camera's focal point (3,).
+        view_up: The camera's up direction (3,).
+        color: The tile's RGB colour in [0, 1].
+
+    Returns:
+        The lit RGB colour in [0, 1].
+    """
+    camera, normal = np.asarray(camera, float), np.asarray(normal, float)
+    if np.dot(camera - point, normal) < 0:
+        normal = -normal  # the side the camera sees
+    back = camera - np.asarray(focal_point, float)
+    back /= np.linalg.norm(back)
+    up = np.asarray(view_up, float) - np.dot(view_up, back) * back
+    up /= np.linalg.norm(up)
+    n = np.array([np.dot(normal, np.cross(up, back)), np.dot(normal, up), np.dot(normal, back)])
+    lit = sum(intensity * max(0.0, float(np.dot(n, position)) / np.linalg.norm(position))
+              for position, intensity in LIGHTS)
+    color = np.asarray(color, float)
+    return np.clip(OBSTACLE_AMBIENT * color + OBSTACLE_DIFFUSE * lit * color, 0.0, 1.0)
