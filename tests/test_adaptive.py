@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 
 import meshio
@@ -37,6 +38,13 @@ def test_large_swing_completes_by_substepping(tmp_path):
     stats = rows(out / "stats.csv")
     assert sum(r["retries"] for r in stats) > 0 and len(stats) > 60
     assert min(r["dt"] for r in stats) < 1 / 60 - 1e-12
+    # the discarded tries' wall time: in the row after them, and in the run's stepping
+    assert all((r["retry_wall_s"] > 0) == (r["retries"] > 0) for r in stats)
+    summary = json.loads((out / "summary.json").read_text())
+    retry_s = sum(r["retry_wall_s"] for r in stats)
+    assert summary["retry_wall_s"] == pytest.approx(retry_s, rel=1e-9)
+    assert summary["wall"]["stepping_s"] == \
+        pytest.approx(sum(r["step_wall_s"] for r in stats) + retry_s, rel=1e-6)
     assert all(math.isfinite(r["total_energy"]) for r in stats)
     assert stats[-1]["time"] == pytest.approx(1.0, abs=1e-12)
     with meshio.xdmf.TimeSeriesReader(str(out / "trajectory.xdmf")) as reader:

@@ -10,6 +10,7 @@ with one implicit Euler step. With ``time.adaptive = false`` the first failure s
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from dataclasses import replace
 
@@ -41,12 +42,13 @@ class AdaptiveStepper:
         """Yield (state, stats row) for each accepted substep until ``t_end`` (s).
 
         Each row is :meth:`~fem_anim.simulation.loop.Simulation.timed_step`'s with
-        ``retries``, the failed tries before it.
+        ``retries``, the failed tries before it, and ``retry_wall_s``, their wall time (s;
+        discarded work, not in the row's ``step_wall_s``).
 
         Raises:
             ConvergenceError: a substep failed with adaptivity off, or at ``time.min_dt``.
         """
-        retries = 0
+        retries, retry_wall = 0, 0.0
         while t_end - state.time > 1e-9 * self.h:
             dt = min(self.dt, t_end - state.time)
             if dt > t_end - state.time - 1e-9 * self.h:
@@ -54,9 +56,11 @@ class AdaptiveStepper:
             trial = state
             if self.sim.integrator.name == "bdf2" and abs(dt - self.last_dt) > 1e-12 * self.h:
                 trial = replace(state, u_old=None, v_old=None)
+            start = time.perf_counter()
             try:
                 new, row = self.sim.timed_step(trial, dt)
             except ConvergenceError as err:
+                retry_wall += time.perf_counter() - start
                 if not self.adaptive or self.dt / 2.0 < self.min_dt:
                     floor = "" if not self.adaptive else \
                         f" (time.min_dt = {self.min_dt:.3g} s reached)"
@@ -64,8 +68,8 @@ class AdaptiveStepper:
                 self.dt /= 2.0
                 retries += 1
                 continue
-            row["retries"] = retries
-            retries = 0
+            row["retries"], row["retry_wall_s"] = retries, retry_wall
+            retries, retry_wall = 0, 0.0
             self.last_dt = dt
             if dt == self.dt:
                 self.dt = min(2.0 * self.dt, self.h)

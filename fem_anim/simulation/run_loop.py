@@ -65,7 +65,8 @@ def run_frames(sim, output_dir: Path | None, quiet: bool, resume: bool) -> RunRe
                 raise Interrupted(f"interrupted by {name} (twice)",
                                   interrupts.received) from None
         loop_s = time.perf_counter() - start
-        stepping = sum(row["step_wall_s"] for row in result.rows[result.resumed_rows:])
+        stepping = sum(row["step_wall_s"] + row.get("retry_wall_s", 0.0)  # discarded tries too
+                       for row in result.rows[result.resumed_rows:])
         sim.clock.add("stepping", stepping)
         sim.clock.add("output", loop_s - stepping)  # frames, stats, checkpoints, finals
         if run_dir is not None:

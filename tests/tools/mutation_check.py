@@ -1276,6 +1276,14 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_cloth_friction.py::test_sheet_on_a_held_sheet_on_a_slope[0.2]",),
              "the friction's smoothing width is eps_v (m/s) taken as a displacement, without "
              "dt: static friction creeps dt^-1 times faster"),
+    Mutation("retry-wall-not-counted", "fem_anim/simulation/adaptive.py",
+             "                retry_wall += time.perf_counter() - start\n", "",
+             ("tests/test_adaptive.py::test_large_swing_completes_by_substepping",),
+             "the discarded tries' wall time is recorded nowhere (stats, summary, stepping)"),
+    Mutation("retry-wall-not-in-stepping", "fem_anim/simulation/run_loop.py",
+             'row["step_wall_s"] + row.get("retry_wall_s", 0.0)', 'row["step_wall_s"] + 0.0',
+             ("tests/test_adaptive.py::test_large_swing_completes_by_substepping",),
+             "the retried tries' time is booked to the output phase, not stepping"),
 ]
 
 
