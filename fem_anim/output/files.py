@@ -41,7 +41,8 @@ STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "s
                  "gravity", "contact", "total_energy", "assembly_s", "factor_s",
                  "linear_solve_s", "other_s", "solve_wall_s", "step_wall_s", "contact_s",
                  "contact_pairs", "residual_ratio", "hessian_assemblies", "factorisations",
-                 "barrier_stiffness", "dhat", "min_distance", "friction_lags", "handle_work"]
+                 "barrier_stiffness", "dhat", "min_distance", "friction_lags", "handle_work",
+                 "inertia_checks", "inertia_fallbacks"]
 
 
 class VertexGather:
