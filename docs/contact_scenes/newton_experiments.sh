@@ -138,12 +138,13 @@ def phases(path: str, steps: int) -> None:
     scene = load_scene(path, overrides=[f"time.steps={steps}"])
     sim = Simulation(scene)
     state = sim.initial_state()
-    total = 0
+    total, last = 0, []
     for _ in range(steps):
         for e in log:
             e["x"] = e["y"] = None
         state, stats = sim.step(state, scene["time"]["dt"])
         total += stats.newton_its
+        last.append(log[-1]["rF"])  # where the step's last direction started
         if log and log[-1]["alpha"] is None:
             log[-1]["alpha"] = 1.0  # the last direction's line search ended the step
     n = len(log)
@@ -158,6 +159,8 @@ def phases(path: str, steps: int) -> None:
     print("shortened by the CCD:", count(lambda e: e["ccd"] < 0.999))
     print("shortened by the line search:", count(lambda e: e["alpha"] < 0.999))
     print("the barrier's exact Hessian:", count(lambda e: e["exact"]))
+    print("steps whose last direction starts at ||r|| / largest force in [1e-6, 1e-3]:",
+          sum(1e-6 <= r <= 1e-3 for r in last), "of", steps)
 
 
 def main(argv: list[str]) -> None:

@@ -291,8 +291,8 @@ class HessianChoice(NewtonCGTrustRegion):
         node, which reports no inertia). A control set on the factor matrix lasts only as
         long as that factor: PCSetUp destroys it and makes a new one, with MUMPS's defaults
         and the ``-mat_mumps_*`` options then in PETSc's database, whenever the Hessian's
-        nonzero pattern changed (contact pairs add nonzeros: on ``demos/pile.toml`` after
-        about ten factorisations). So the control is set on the first factor and also
+        nonzero pattern changed (contact pairs add nonzeros, as soon as new pairs appear).
+        So the control is set on the first factor and also
         returned as a solver option, to be in the database at every factorisation
         (:class:`~fem_anim.solver.minimiser.Minimiser` keeps it there while solving).
 
