@@ -13,9 +13,13 @@ largest difference of the final displacement from the first variant's.
 Variants: ``now``; ``expand`` (before PETSc's backtracking, the Newton step is doubled, up to
 16x and within the collision-free bound of the longer step, while the step objective keeps
 falling: an extrapolating line search); ``expand_stalled`` (the same, only after an iteration
-that did not halve ||r||); ``exact_if_pd`` (every iteration first assembles the
-barrier's and friction's exact Hessian and keeps it where MUMPS's factorisation has no
-negative pivot, INFOG(12), else IPC's projection); ``set:KEY=VALUE`` (a scene override, e.g.
+that did not halve ||r||); ``exact_if_pd`` (every iteration first assembles the barrier's and
+friction's exact Hessian and keeps it where MUMPS's factorisation has no negative pivot,
+INFOG(12), else IPC's projection); ``irls_friction`` (the surfaces' lagged friction with the
+Hessian of iteratively reweighted least squares, mu lambda w (f1(|u|)/|u|) Gamma^T T T^T Gamma
+per pair: PSD, and stiff along the slip where the exact one has f1' = 0; a Python loop over
+the pairs, so slow); ``irls_friction_far`` (the same only while the barrier's Hessian is
+projected, the exact one near the solution); ``set:KEY=VALUE`` (a scene override, e.g.
 ``set:contact.stiffness=1000``).
 
 ``--phases``: every Newton direction of the current code classified by ||r|| over the largest
@@ -37,6 +41,9 @@ from fem_anim.simulation.loop import Simulation
 from fem_anim.solver import hessian_choice, minimiser
 from fem_anim.solver.step_bounds import step_limit
 
+from fem_anim.contact import ipc as ipc_module
+
+STAGE_FRICTION = ipc_module.IPCContact._stage_friction
 PRECHECK = minimiser.Minimiser._precheck
 JACOBIAN = hessian_choice.HessianChoice.jacobian
 INIT = minimiser.Minimiser.__init__
@@ -98,7 +105,60 @@ def exact_if_pd(self, snes, x, A, P):
         JACOBIAN(self, snes, x, A, P)
 
 
+class ReweightedFriction:
+    """ipctk's lagged friction with the Hessian of iteratively reweighted least squares:
+    per pair mu lambda w (f1(|u|)/|u|) Gamma^T T T^T Gamma (u = T^T Gamma (x - x_n) the
+    tangential slip; PSD, and stiff along the slip where the exact Hessian has f1' = 0)."""
+
+    def __init__(self, potential, far_only):
+        self.potential, self.far_only = potential, far_only
+
+    def __call__(self, *args):
+        return self.potential(*args)
+
+    def __getattr__(self, name):
+        return getattr(self.potential, name)
+
+    def hessian(self, collisions, mesh, slip, projection=None):
+        import ipctk
+        import scipy.sparse as sp
+
+        if self.far_only and projection == ipctk.PSDProjectionMethod.NONE:
+            return self.potential.hessian(collisions, mesh, slip, projection)  # exact near
+
+        eps = self.potential.eps_v
+        dim = slip.shape[1]
+        rows, cols, vals = [], [], []
+        for c in collisions:
+            ids = np.asarray(c.vertex_ids(mesh.edges, mesh.faces))
+            G = np.asarray(c.relative_velocity_jacobian())
+            T = np.asarray(c.tangent_basis)
+            v = np.asarray(c.dof(slip, mesh.edges, mesh.faces)).ravel()
+            y = np.linalg.norm(T.T @ (G @ v))
+            ratio = (2.0 / eps - y / eps ** 2) if y < eps else 1.0 / y
+            B = T.T @ G
+            H = c.mu_k * c.normal_force_magnitude * c.weight * ratio * (B.T @ B)
+            dofs = np.concatenate([np.arange(k * dim, k * dim + dim) for k in ids if k >= 0])
+            n = dofs.size
+            rows.append(np.repeat(dofs, n))
+            cols.append(np.tile(dofs, n))
+            vals.append(H[:n, :n].ravel())
+        size = slip.size
+        if not rows:
+            return sp.csc_matrix((size, size))
+        return sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows),
+                                                     np.concatenate(cols))), (size, size))
+
+
+def reweighted_stage(self, h):
+    STAGE_FRICTION(self, h)
+    self.friction = ReweightedFriction(self.friction, self.irls_far_only)
+
+
 def run(path: str, steps: int, variant: str):
+    ipc_module.IPCContact._stage_friction = reweighted_stage \
+        if variant.startswith("irls_friction") else STAGE_FRICTION
+    ipc_module.IPCContact.irls_far_only = variant == "irls_friction_far"
     minimiser.Minimiser._precheck = expanding_precheck if variant.startswith("expand") \
         else PRECHECK
     minimiser.Minimiser.expand_when = "stalled" if variant == "expand_stalled" else "always"
