@@ -3,7 +3,10 @@ of ``stats.csv`` is a distance (m), measured here against the geometry of the pa
 
 from __future__ import annotations
 
+import csv
+
 import numpy as np
+import pytest
 from test_contact_pace import STACK
 
 from fem_anim.scene.loading import Scene
@@ -89,3 +92,49 @@ def test_landing_stack_keeps_newton_iterations_low_with_the_predictor_start():
     sim.minimiser.destroy()
     assert max(its) <= 10 and sum(its) / len(its) <= 3.5, its
     assert max(its[10:]) <= 2, its
+
+
+def test_auto_reads_the_inertia_of_every_factorisation_after_new_pairs(tmp_path):
+    """``solver.hessian = "auto"`` on the landing stack: contact pairs add nonzeros to the
+    Hessian, so PCSetUp replaces MUMPS's factor (and the controls set on it) during the run;
+    every step's Hessians still have their inertia read off their factorisation
+    (``inertia_checks`` in stats.csv: at least one a step, over more than 10
+    factorisations), none falls back to the CG probe (``inertia_fallbacks``). Before, the
+    inertia was read by MatGetInertia, which needs ICNTL(24) = 1 on the factor: it failed
+    once the factor was replaced, and auto lost its check for the rest of the run without a
+    trace."""
+    from test_contact_pace import run
+
+    rows, _, _ = run(tmp_path, STACK.format(steps=12), 'solver.hessian="auto"')
+    checks = [int(r["inertia_checks"]) for r in rows]
+    fallbacks = [int(r["inertia_fallbacks"]) for r in rows]
+    assert sum(int(r["factorisations"]) for r in rows) > 10
+    assert int(rows[-1]["contact_pairs"]) > 0
+    assert min(checks) >= 1 and not any(fallbacks), (checks, fallbacks)
+
+
+@pytest.mark.mpi
+def test_auto_reads_the_inertia_on_two_ranks(tmp_path):
+    """The same under ``mpirun -n 2``: MUMPS counts the negative pivots of the whole matrix
+    only with ICNTL(13) = 1, which must reach every replaced factor too (it is kept in
+    PETSc's database while solving), so no factorisation falls back to the CG probe."""
+    import subprocess
+
+    from conftest import clean_environment, fem_anim_command, mpirun_command
+
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    scene = tmp_path / "stack.toml"
+    scene.write_text(STACK.format(steps=8))
+    out = tmp_path / "out"
+    r = subprocess.run(mpirun + fem_anim_command() + [
+        "run", "-q", str(scene), "-o", str(out), "--set", 'solver.hessian="auto"',
+        "--set", "output.render=false"], capture_output=True, text=True, timeout=600,
+        env=clean_environment())
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.DictReader(open(out / "stats.csv")))
+    checks = [int(row["inertia_checks"]) for row in rows]
+    fallbacks = [int(row["inertia_fallbacks"]) for row in rows]
+    assert sum(int(row["factorisations"]) for row in rows) > 10
+    assert min(checks) >= 1 and not any(fallbacks), (checks, fallbacks)

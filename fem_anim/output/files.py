@@ -42,7 +42,7 @@ STATS_COLUMNS = ["step", "time", "dt", "retries", "newton_its", "linear_its", "s
                  "linear_solve_s", "other_s", "solve_wall_s", "step_wall_s", "contact_s",
                  "contact_pairs", "residual_ratio", "hessian_assemblies", "factorisations",
                  "barrier_stiffness", "dhat", "min_distance", "friction_lags", "handle_work",
-                 "retry_wall_s"]
+                 "retry_wall_s", "inertia_checks", "inertia_fallbacks"]
 
 
 class VertexGather:

@@ -87,8 +87,6 @@ def solver_options(scene, cli_options: dict[str, str] | None = None,
     if scene["solver"]["method"] == "lbfgs" and scene["solver"]["hessian_update"] != \
             "every_iteration":  # the kept Hessian is L-BFGS's initial one (hessian_reuse.py)
         method = method | {"snes_qn_scale_type": "jacobian"}
-    if scene["solver"]["hessian"] in ("shift", "auto"):
-        layer = layer | {"mat_mumps_icntl_13": "1"}  # exact inertia from MUMPS in parallel
     try:  # the scene checked the method; the preset may come from the command line
         forcing = forcing_options(scene["solver"]["forcing"], merge_options(layer, above))
     except ValueError as err:
@@ -319,6 +317,8 @@ class Simulation:
             "residual_ratio": solve.residual_ratio,
             "hessian_assemblies": solve.hessian_assemblies,
             "factorisations": solve.factorisations,
+            "inertia_checks": solve.inertia_checks,
+            "inertia_fallbacks": solve.inertia_fallbacks,
             **{f"{kind}_its": count for kind, count in solve.hessian_its.items()}, **energies,
             "handle_work": work,
             "assembly_s": solve.assembly_s,

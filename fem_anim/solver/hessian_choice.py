@@ -92,7 +92,8 @@ class HessianChoice(NewtonCGTrustRegion):
         self.restarts = 0
         self.truncated = 0  # auto with CG: this step's solves stopped at negative curvature
         self._last_iterate = None
-        self._inertia = True  # whether the factorisation reports its inertia (auto)
+        self.inertia_checks = 0  # this step's Hessians whose factorisation gave the inertia
+        self.inertia_fallbacks = 0  # ... that reported none: checked by cg_probe instead
         self._start_trust_region()  # auto with CG (NewtonCGTrustRegion)
 
     def start_step(self) -> None:
@@ -101,6 +102,7 @@ class HessianChoice(NewtonCGTrustRegion):
         self.drop_model()
         self._filtered = self._no_exact = False
         self.restarts = self.truncated = 0
+        self.inertia_checks = self.inertia_fallbacks = 0
         self._indefinite_seen = False
         self.leave_trust_region()
         self._radius = None
@@ -281,45 +283,79 @@ class HessianChoice(NewtonCGTrustRegion):
                 self._trust_region(rho, A)
         self.its[how or "exact"] += 1
 
-    def enable_inertia(self, A: PETSc.Mat) -> None:
-        """Ask MUMPS's Cholesky for the inertia of its factors (``auto``).
+    def enable_inertia(self, A: PETSc.Mat) -> dict[str, str]:
+        """Make MUMPS's Cholesky report the inertia of every factorisation (``auto``).
 
-        PETSc 3.18's MatGetInertia for MUMPS answers only with null-pivot detection
-        (ICNTL(24) = 1), and MUMPS reads its ``-mat_mumps_*`` options when it first
-        factorises, after the solver options have left PETSc's database
-        (:func:`fem_anim.petsc_options.options_in_database`): the controls are set on
-        the factor matrix itself, before its first factorisation.
+        The number of negative pivots is MUMPS's INFOG(12) (:meth:`_negative_count`); under
+        MPI it counts the whole matrix only with ICNTL(13) = 1 (no ScaLAPACK on the root
+        node, which reports no inertia). A control set on the factor matrix lasts only as
+        long as that factor: PCSetUp destroys it and makes a new one, with MUMPS's defaults
+        and the ``-mat_mumps_*`` options then in PETSc's database, whenever the Hessian's
+        nonzero pattern changed (contact pairs add nonzeros, as soon as new pairs appear).
+        So the control is set on the first factor and also
+        returned as a solver option, to be in the database at every factorisation
+        (:class:`~fem_anim.solver.minimiser.Minimiser` keeps it there while solving).
+
+        Returns:
+            The options (names without prefix) to keep in the database; empty for other
+            solvers.
         """
         ksp = self.snes.getKSP()
         pc = ksp.getPC()
         if pc.getType() != "cholesky" or pc.getFactorSolverType() != "mumps":
-            return
+            return {}
         ksp.setOperators(A, A)
         pc.setFactorSetUpSolverType()
+        pc.getFactorMatrix().setMumpsIcntl(13, 1)  # the inertia of the whole matrix under MPI
+        return {"mat_mumps_icntl_13": "1"}
+
+    def _negative_count(self, pc: PETSc.PC) -> int | None:
+        """The negative pivots of the factorisation of ``pc`` (set up), or None where it
+        reports no inertia: MUMPS's Cholesky INFOG(12) (under MPI only with ICNTL(13) = 1;
+        for an LU factorisation INFOG(12) counts off-diagonal pivots instead), others by
+        MatGetInertia (PETSc's own Cholesky; an LU factorisation has none)."""
         factor = pc.getFactorMatrix()
-        factor.setMumpsIcntl(24, 1)  # null pivot detection: MatGetInertia answers
-        factor.setMumpsIcntl(13, 1)  # the inertia of the whole matrix under MPI
+        PETSc.Sys.pushErrorHandler("ignore")
+        try:
+            if pc.getType() == "cholesky" and pc.getFactorSolverType() == "mumps":
+                if factor.getComm().getSize() > 1 and factor.getMumpsIcntl(13) != 1:
+                    return None
+                return int(factor.getMumpsInfog(12))
+            negative, _, _ = factor.getInertia()
+            return int(negative)
+        except PETSc.Error:
+            return None
+        finally:
+            PETSc.Sys.popErrorHandler()
 
     def _negative_pivots(self, A: PETSc.Mat) -> bool:
-        """Whether the Cholesky factorisation of A (kept for the solve) has a negative pivot.
+        """Whether the exact Hessian A is indefinite (``auto``; the factorisation is kept for
+        the solve).
 
-        False for solvers that report no inertia (Krylov presets, LU): ``auto`` then learns
-        of an indefinite Hessian from the failed solve or line search instead.
+        With a Cholesky preset, from the inertia of its factorisation (counted in
+        ``inertia_checks``); should the factorisation report none, by the eigenvalue-free
+        :func:`cg_probe` instead, counted in ``inertia_fallbacks`` (stats.csv), so the check
+        is never lost silently. False for solvers that report no inertia (Krylov presets,
+        LU): ``auto`` then learns of an indefinite Hessian from the failed solve or line
+        search instead.
         """
         ksp = self.snes.getKSP()
         pc = ksp.getPC()
-        if not self._inertia or pc.getType() != "cholesky":
+        if pc.getType() != "cholesky":
             return False
         ksp.setOperators(A, A)
         PETSc.Sys.pushErrorHandler("ignore")
         try:
             pc.setUp()
-            negative, _, _ = pc.getFactorMatrix().getInertia()
+            negative = self._negative_count(pc)
         except PETSc.Error:
-            self._inertia = False  # this factorisation reports no inertia
-            return False
+            negative = None  # e.g. PETSc's Cholesky stopped at a zero pivot
         finally:
             PETSc.Sys.popErrorHandler()
+        if negative is None:
+            self.inertia_fallbacks += 1
+            return cg_probe(A) == PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
+        self.inertia_checks += 1
         return negative > 0
 
     def _positive_definite(self, A: PETSc.Mat) -> bool:
@@ -330,12 +366,15 @@ class HessianChoice(NewtonCGTrustRegion):
             PETSc.Sys.pushErrorHandler("ignore")
             try:
                 pc.setUp()
-                negative, _, _ = pc.getFactorMatrix().getInertia()
-                return negative == 0
+                negative = self._negative_count(pc)
             except PETSc.Error:
-                pass  # this factorisation reports no inertia: ask CG instead
+                negative = None  # this factorisation reports no inertia: ask CG instead
             finally:
                 PETSc.Sys.popErrorHandler()
+            if negative is not None:
+                self.inertia_checks += 1
+                return negative == 0
+            self.inertia_fallbacks += 1
         return cg_probe(A) != PETSc.KSP.ConvergedReason.DIVERGED_INDEFINITE_MAT
 
     def destroy(self) -> None:

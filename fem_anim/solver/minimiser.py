@@ -172,8 +172,11 @@ class Minimiser:
         pc = snes.getKSP().getPC()
         if pc.getType() == "fieldsplit" and hasattr(problem, "configure_preconditioner"):
             problem.configure_preconditioner(pc)
-        if self.hessian.mode == "auto":
-            self.hessian.enable_inertia(self.A)
+        if self.hessian.mode in ("auto", "shift"):
+            # the inertia controls must be in the database at every factorisation: a new
+            # nonzero pattern (contact) makes PCSetUp replace the factor and its controls
+            for name, value in self.hessian.enable_inertia(self.A).items():
+                self.options.setdefault(name, value)
 
     @property
     def shift(self):
@@ -296,7 +299,9 @@ class Minimiser:
             initial_residual_norm=self.stop.initial_norm,
             hessian_its=self.hessian.counts(), residual_ratio=norm / self.stop.target(self.snes),
             hessian_assemblies=self.reuse.assemblies + self.stop.polish_assemblies,
-            factorisations=self._events[0].getPerfInfo()["count"] - factorisations0)
+            factorisations=self._events[0].getPerfInfo()["count"] - factorisations0,
+            inertia_checks=self.hessian.inertia_checks,
+            inertia_fallbacks=self.hessian.inertia_fallbacks)
         if reason <= 0:
             ksp_reason = self.snes.getKSP().getConvergedReason()
             raise ConvergenceError(
@@ -405,11 +410,8 @@ class Minimiser:
                 ksp, A = apart
             self.problem.jacobian(self.snes, x, A, A)
             ksp.setOperators(A, A)
-        if apart is None:
+        with options_in_database(self.prefix, self.options):  # MUMPS reads its own here
             ksp.solve(r, step)
-        else:
-            with options_in_database(self.prefix, self.options):  # MUMPS reads its own here
-                ksp.solve(r, step)
         self._own_linear_its += ksp.getIterationNumber()
         return 0.5 * abs(r.dot(step))
 

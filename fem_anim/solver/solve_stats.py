@@ -40,6 +40,10 @@ class SolveStats:
             ``solver.hessian_update`` keeps one).
         factorisations: Preconditioner set-ups (PETSc's PCSetUp events: a direct solver's
             factorisations).
+        inertia_checks: Hessians whose definiteness ``solver.hessian = "auto"`` or
+            ``"shift"`` read off the inertia of their Cholesky factorisation.
+        inertia_fallbacks: ... whose factorisation reported no inertia, so the CG probe
+            (:func:`fem_anim.solver.hessian_choice.cg_probe`) judged them instead.
     """
 
     newton_its: int
@@ -57,3 +61,5 @@ class SolveStats:
     residual_ratio: float = float("nan")
     hessian_assemblies: int = 0
     factorisations: int = 0
+    inertia_checks: int = 0
+    inertia_fallbacks: int = 0

@@ -1284,6 +1284,59 @@ MUTATIONS: list[Mutation] = [
              'row["step_wall_s"] + row.get("retry_wall_s", 0.0)', 'row["step_wall_s"] + 0.0',
              ("tests/test_adaptive.py::test_large_swing_completes_by_substepping",),
              "the retried tries' time is booked to the output phase, not stepping"),
+    Mutation("inertia-lost-with-the-factor", "fem_anim/solver/hessian_choice.py",
+             ('        pc.getFactorMatrix().setMumpsIcntl(13, 1)  # the inertia of the '
+              'whole matrix under MPI\n'
+              '        return {"mat_mumps_icntl_13": "1"}\n'
+              '\n'
+              '    def _negative_count(self, pc: PETSc.PC) -> int | None:\n'
+              '        """The negative pivots of the factorisation of ``pc`` (set up), '
+              'or None where it\n'
+              "        reports no inertia: MUMPS's Cholesky INFOG(12) (under MPI only w"
+              'ith ICNTL(13) = 1;\n'
+              '        for an LU factorisation INFOG(12) counts off-diagonal pivots ins'
+              'tead), others by\n'
+              '        MatGetInertia (PETSc\'s own Cholesky; an LU factorisation has none)."""\n'
+              '        factor = pc.getFactorMatrix()\n'
+              '        PETSc.Sys.pushErrorHandler("ignore")\n'
+              '        try:\n'
+              '            if pc.getType() == "cholesky" and pc.getFactorSolverType() ='
+              '= "mumps":\n'
+              '                if factor.getComm().getSize() > 1 and factor.getMumpsIcn'
+              'tl(13) != 1:\n'
+              '                    return None\n'
+              '                return int(factor.getMumpsInfog(12))\n'),
+             ('        pc.getFactorMatrix().setMumpsIcntl(24, 1)  # on the first factor only\n'
+              '        pc.getFactorMatrix().setMumpsIcntl(13, 1)\n'
+              '        return {}\n'
+              '\n'
+              '    def _negative_count(self, pc: PETSc.PC) -> int | None:\n'
+              '        """The negative pivots of the factorisation of ``pc`` (set up), '
+              'or None where it\n'
+              "        reports no inertia: MUMPS's Cholesky INFOG(12) (under MPI only w"
+              'ith ICNTL(13) = 1;\n'
+              '        for an LU factorisation INFOG(12) counts off-diagonal pivots ins'
+              'tead), others by\n'
+              '        MatGetInertia (PETSc\'s own Cholesky; an LU factorisation has none)."""\n'
+              '        factor = pc.getFactorMatrix()\n'
+              '        PETSc.Sys.pushErrorHandler("ignore")\n'
+              '        try:\n'
+              '            if pc.getType() == "cholesky" and pc.getFactorSolverType() ='
+              '= "mumps":\n'
+              '                if factor.getComm().getSize() > 1 and factor.getMumpsIcn'
+              'tl(13) != 1:\n'
+              '                    return None\n'
+              '                return int(factor.getInertia()[0])  # needs ICNTL(24) = 1\n'),
+             ("tests/test_newton_pace.py::"
+              "test_auto_reads_the_inertia_of_every_factorisation_after_new_pairs",),
+             "auto reads the inertia by MatGetInertia with ICNTL(24) set on the first MUMPS "
+             "factor only: once new contact pairs make PCSetUp replace the factor it fails"),
+    Mutation("inertia-icntl13-on-first-factor-only", "fem_anim/solver/minimiser.py",
+             "                self.options.setdefault(name, value)\n",
+             "                pass\n",
+             ("tests/test_newton_pace.py::test_auto_reads_the_inertia_on_two_ranks",),
+             "ICNTL(13) = 1 only on the first MUMPS factor: under MPI a factor replaced after "
+             "new contact pairs counts no global inertia"),
 ]
 
 
