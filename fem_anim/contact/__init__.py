@@ -4,7 +4,8 @@
 smooth barrier with lagged friction over the exterior facets, with the step bound that keeps
 every trial point outside them; :mod:`~fem_anim.contact.ipc` wraps the IPC Toolkit for contact
 between surfaces (bodies with each other and with themselves: barrier, continuous collision
-detection, friction) under MPI, on the surface :mod:`~fem_anim.contact.contact_surface` gives
+detection; friction lagged at the step start, :mod:`~fem_anim.contact.lagged_friction`;
+the check of the surfaces at rest, :mod:`~fem_anim.contact.rest_check`) under MPI, on the surface :mod:`~fem_anim.contact.contact_surface` gives
 (a solid's boundary, or a shell's triangles kept its thickness apart) and
 :mod:`~fem_anim.contact.p2_surface` puts on the displacement's dofs (P2 facets split on their
 midpoint dofs); :mod:`~fem_anim.contact.intersection` is an independent check, on the cells
@@ -23,6 +24,8 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "tetra10_cells": "intersection",
     "surface_faces": "p2_surface",
     "IPCContact": "ipc",
+    "LaggedFriction": "lagged_friction",
+    "rest_problem": "rest_check",
     "KEEP_FRACTION": "obstacles",
     "ObstacleContact": "obstacles",
     "contact_quadrature": "obstacles",

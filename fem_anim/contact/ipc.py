@@ -57,7 +57,9 @@ from petsc4py import PETSc
 
 from fem_anim.contact.contact_surface import surface_entities
 from fem_anim.contact.distribution import SurfacePartition, owned_collisions, surface_labels
+from fem_anim.contact.lagged_friction import LaggedFriction
 from fem_anim.contact.p2_surface import surface_faces
+from fem_anim.contact.rest_check import rest_problem
 from fem_anim.errors import SceneError
 
 __all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "HALO_MARGIN",
@@ -154,7 +156,7 @@ class IPCContact:
         self._distance = np.inf
         #: IPC's per-pair projection of the Hessian (NONE: the exact Hessian, for tests)
         self.projection = ipctk.PSDProjectionMethod.CLAMP
-        self.friction = None  # the step's lagged friction potential, if any
+        self.friction: LaggedFriction | None = None  # the step's lagged friction, if any
         self._x = None
         self._drift = 0.0
         self.potential = ipctk.BarrierPotential(self.dhat, 1.0, True)
@@ -169,7 +171,10 @@ class IPCContact:
         #: how many local meshes this rank has built (halos, and wider ones for a CCD sweep)
         self.halo_builds = 0
         self.halo = self._build_halo()
-        error = self._check_rest(body_names)
+        x = self._update()
+        error = rest_problem(self.comm, self.halo, x, self.collisions,
+                             np.sqrt(self._min_distance(x)),  # ipctk's is d^2
+                             self.offset, self.dhat, body_names)
         if error:
             raise SceneError(error)
 
@@ -248,9 +253,9 @@ class IPCContact:
 
     def _friction_positions(self, x: np.ndarray) -> np.ndarray:
         """Positions on the mesh the friction was lagged on (collective)."""
-        if self._friction_halo is self.halo:
+        if self.friction.halo is self.halo:
             return x
-        return self._friction_halo.positions(self._u_owned())
+        return self.friction.halo.positions(self._u_owned())
 
     def _to_global(self, halo, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
         """Triplets of a local mesh's dofs, free rows and columns only, as the unknown's
@@ -276,9 +281,7 @@ class IPCContact:
         start = time.perf_counter()
         value = self.kappa * self.potential(self.collisions, self.halo.mesh, x)
         if friction and self.friction is not None:
-            xf = self._friction_positions(x)
-            value += self.friction(self.tangential, self._friction_halo.mesh,
-                                   xf - self._x_lagged)
+            value += self.friction.energy(self._friction_positions(x))
         value = self.comm.allreduce(value)
         self.timers["barrier_s"] += time.perf_counter() - start
         return value
@@ -290,13 +293,11 @@ class IPCContact:
         grad = (scale * self.kappa) * self.potential.gradient(self.collisions, self.halo.mesh,
                                                               x)
         if friction and self.friction is not None:
-            xf = self._friction_positions(x)
-            dgrad = scale * self.friction.gradient(self.tangential, self._friction_halo.mesh,
-                                                   xf - self._x_lagged)
-            if self._friction_halo is self.halo:
+            dgrad = scale * self.friction.gradient(self._friction_positions(x))
+            if self.friction.halo is self.halo:
                 grad += dgrad
             else:
-                self._friction_halo.to_owners(dgrad.reshape(-1, g), owned)
+                self.friction.halo.to_owners(dgrad.reshape(-1, g), owned)
         self.halo.to_owners(grad.reshape(-1, g), owned)
         return owned
 
@@ -329,14 +330,12 @@ class IPCContact:
                                                 self.projection)
         triplets = []
         if self.friction is not None:
-            xf = self._friction_positions(x)
-            Hf = self.friction.hessian(self.tangential, self._friction_halo.mesh,
-                                       xf - self._x_lagged, self.projection)
-            if self._friction_halo is self.halo:
+            Hf = self.friction.hessian(self._friction_positions(x), self.projection)
+            if self.friction.halo is self.halo:
                 H = H + Hf
             else:
                 Hf = Hf.tocoo()
-                triplets.append(self._to_global(self._friction_halo, Hf.row, Hf.col,
+                triplets.append(self._to_global(self.friction.halo, Hf.row, Hf.col,
                                                 scale * Hf.data))
         H = H.tocoo()
         triplets.insert(0, self._to_global(self.halo, H.row, H.col, scale * H.data))
@@ -358,9 +357,9 @@ class IPCContact:
     def friction_adjoint(self, lam: np.ndarray, w: float) -> np.ndarray:
         """w (Hess D + (dF/dx_n)^T) lambda on the owned dof blocks (collective).
 
-        The adjoint of IPC's lagged friction (:mod:`fem_anim.adjoint.backward`): D's exact,
-        unprojected Hessian and ipctk's ``force_jacobian`` with respect to the lagged
-        displacements, on the pairs this rank owns (its friction mesh), summed at the owners.
+        The adjoint of IPC's lagged friction (:mod:`fem_anim.adjoint.backward`):
+        :meth:`~fem_anim.contact.lagged_friction.LaggedFriction.adjoint` on the pairs this
+        rank owns (its friction mesh), summed at the owners.
 
         Args:
             lam: A local dof array of ``V`` (the adjoint variable).
@@ -370,22 +369,11 @@ class IPCContact:
             (owned blocks, gdim) rows, zero off the free surface dofs.
         """
         x = self._update()
-        halo, g = self._friction_halo, self.gdim
-        lam = halo.exchange.fetch(lam.reshape(-1, g)[: self.n_owned]).ravel()
-        free = halo.free
-        lam = lam * free
-        rest = halo.mesh.rest_positions
-        slip = self._friction_positions(x) - self._x_lagged
-        Hd = self.friction.hessian(self.tangential, halo.mesh, slip,
-                                   ipctk.PSDProjectionMethod.NONE)
-        normal = ipctk.BarrierPotential(self.dhat, self.kappa, True)
-        Jl = self.friction.force_jacobian(
-            self.tangential, halo.mesh, np.asfortranarray(rest),
-            np.asfortranarray(self._x_lagged - rest), np.asfortranarray(slip), normal,
-            ipctk.TangentialPotential.DiffWRT.LAGGED_DISPLACEMENTS)
-        out = Hd @ lam + Jl.T @ lam
+        halo, g = self.friction.halo, self.gdim
+        lam = halo.exchange.fetch(lam.reshape(-1, g)[: self.n_owned]).ravel() * halo.free
+        out = self.friction.adjoint(lam, self._friction_positions(x))
         owned = np.zeros((self.n_owned, g))
-        halo.to_owners((w * out * free).reshape(-1, g), owned)
+        halo.to_owners((w * out * halo.free).reshape(-1, g), owned)
         return owned
 
     # -- admissibility ----------------------------------------------------------------------
@@ -472,21 +460,12 @@ class IPCContact:
             self._stage_friction(h)
 
     def _stage_friction(self, h: float) -> None:
-        """IPC's lagged friction (section 5): normal forces and tangent bases at x_n,
-
-        D(x) = sum_k mu lambda_k f0(|T_k^T (x - x_n)|), f0 smoothed over eps_v h,
-
-        with lambda_k the pair's barrier force kappa |dB_k/dd| (area-weighted, in N).
-        """
+        """IPC's lagged friction at the current ``u`` = u_n on this rank's local mesh
+        (:mod:`fem_anim.contact.lagged_friction`), kept there if the halo is rebuilt."""
         x = self._update()
-        normal = ipctk.BarrierPotential(self.dhat, self.kappa, True)
-        self.tangential = ipctk.TangentialCollisions()
-        self.tangential.build(self.halo.mesh, x, self.collisions, normal,
-                              float(self.cfg["friction"]))
-        self.friction = ipctk.FrictionPotential(float(self.cfg["epsv"]) * h)
-        self._x_lagged = x.copy()
-        #: the local mesh the friction pairs live on (kept if the halo is rebuilt)
-        self._friction_halo = self.halo
+        mu = float(self.cfg["friction"])
+        self.friction = LaggedFriction(self.halo, x, self.collisions, self.dhat, self.kappa, mu,
+                                       float(self.cfg["epsv"]) * h)
 
     def _adapt(self, weight: float, grad_energy: np.ndarray, average_mass: float) -> None:
         """IPC's adaptive kappa at the step start (module docstring), from global sums."""
@@ -571,32 +550,3 @@ class IPCContact:
             self.kappa_floor = ipctk.update_barrier_stiffness(
                 self._distance, d, self.kappa_max, self.kappa_floor, self.diagonal,
                 dmin=self.offset)
-
-    def _check_rest(self, names: list[str]) -> str | None:
-        """No surfaces cross, no two bodies within d_hat at rest (None: fine; collective).
-
-        Pairs of one body within d_hat are legal (a thin part): the barrier is finite there.
-        Each rank checks its local mesh; the verdicts are combined.
-        """
-        x = self._update()
-        mesh, body = self.halo.mesh, self.halo.vertex_body
-        ids = [c.vertex_ids(mesh.edges, mesh.faces) for c in self.collisions]
-        pairs = {tuple(sorted({int(body[v]) for v in vs if v >= 0})) for vs in ids}
-        between = sorted(set().union(*self.comm.allgather({p for p in pairs if len(p) == 2})))
-        if self.comm.allreduce(bool(ipctk.has_intersections(mesh, x)), op=MPI.LOR):
-            if between:
-                a, b = between[0]
-                return (f"at rest, bodies {names[a]!r} and {names[b]!r} intersect; move them "
-                        "apart (body offset)")
-            return "at rest, the bodies' surfaces intersect (a mesh crosses itself)"
-        d = np.sqrt(self._min_distance(x))  # ipctk's is d^2
-        if self.offset > 0 and np.isfinite(d) and d <= self.offset:
-            return (f"at rest, two non-adjacent elements of a shell are {d:.3g} m apart, not "
-                    f"more than its thickness {self.offset} m (the contact offset); make the "
-                    "shell thinner or its elements larger")
-        if between:
-            a, b = between[0]
-            return (f"at rest, bodies {names[a]!r} and {names[b]!r} are closer than "
-                    f"contact.dhat = {self.dhat} m; move them apart (body offset) or reduce "
-                    "contact.dhat")
-        return None
