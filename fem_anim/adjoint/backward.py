@@ -138,6 +138,7 @@ class BackwardSweep:
                 r0 = r0 + ufl.derivative(p._dissipation(p.v, zero, 1.0), p.v, dv)
             L0 = ufl.action(ufl.replace(r0, rep), self.lam)
             forms["v0"] = ufl.derivative(L0, p.v, dv)
+            forms["u0"] = ufl.derivative(L0, p.u, dv)  # grad E(u_0): u_0 a parameter
             for name, f in coefficients.items():
                 forms[f"theta0_{name}"] = ufl.derivative(L0, f, cell)
             forms["mass"] = ufl.replace(p.rho * ufl.inner(du, dv) * p.dx_mass, rep)
@@ -278,13 +279,13 @@ class BackwardSweep:
                 target["u"] = target["u"] - self.vector("prev")
             if p.ipc is not None and p.ipc.friction is not None:
                 target["u"] = target["u"] + self._ipc_friction_bar()
-        v_bar = state_bars[0].get("v", zero)
+        bar0 = {"u": state_bars[0].get("u", zero), "v": state_bars[0].get("v", zero)}
         if self.newmark:
-            v_bar = v_bar + self._initial_acceleration(tape.states[0], state_bars[0], grad)
-        for name in names:
-            basis = self.parameters.velocity_basis(name, p)
-            if basis is not None:
-                grad[name] += self.dot(v_bar, basis)
+            u_part, v_part = self._initial_acceleration(tape.states[0], state_bars[0], grad)
+            bar0 = {"u": bar0["u"] + u_part, "v": bar0["v"] + v_part}
+        for name in names:  # u_0 and v_0's dependence on the parameters
+            for field, basis in self.parameters.initial_bases(name, p):
+                grad[name] += self.dot(bar0[field], basis)
         return np.array([grad[name] for name in names])
 
     def stage(self, sim, tape, n: int) -> None:
@@ -324,9 +325,10 @@ class BackwardSweep:
         local.reshape(-1, ipc.gdim)[: rows.shape[0]] = rows
         return self.consistent(local)
 
-    def _initial_acceleration(self, state: State, bar: dict, grad: dict) -> np.ndarray:
-        """Back through M a_0 = -grad E(0) - C v_0: adds theta's part to ``grad`` and
-        returns v_0's."""
+    def _initial_acceleration(self, state: State, bar: dict,
+                              grad: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Back through M a_0 = -grad E(u_0) - C v_0: adds theta's part to ``grad`` and
+        returns u_0's and v_0's."""
         p = self.problem
         a_bar = bar.get("a", np.zeros_like(state.u)).copy()
         p.u.x.array[:] = state.u
@@ -335,4 +337,4 @@ class BackwardSweep:
         self.solve("mass", a_bar)
         for name, value in self.material_bar("theta0").items():
             grad[name] += value
-        return -self.vector("v0")
+        return -self.vector("u0"), -self.vector("v0")

@@ -595,8 +595,8 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint.py::test_gradient_equals_central_differences",),
              "the forward keeps gravity's nodal force of the first density"),
     Mutation("adjoint-no-initial-acceleration", "fem_anim/adjoint/backward.py",
-             "            v_bar = v_bar + self._initial_acceleration(",
-             "            v_bar = v_bar + 0.0 * self._initial_acceleration(",
+             '            bar0 = {"u": bar0["u"] + u_part, "v": bar0["v"] + v_part}',
+             '            bar0 = {"u": bar0["u"] + u_part, "v": bar0["v"] + 0.0 * v_part}',
              ("tests/test_adjoint.py::test_gradient_equals_central_differences",),
              "Newmark's a_0 = M^-1 (f - C v_0) taken as independent of v_0"),
     Mutation("adjoint-vector-no-ghost-sum", "fem_anim/adjoint/backward.py",
@@ -644,8 +644,8 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint_parameters.py::test_gradient_equals_central_differences",),
              "a region's parameter summed over every cell, not the region's"),
     Mutation("adjoint-body-velocity-everywhere", "fem_anim/adjoint/parameters.py",
-             "        if dofs is None:\n            basis[:, i] = 1.0",
-             "        if True:\n            basis[:, i] = 1.0",
+             "        if dofs is None:\n            out[:] = values",
+             "        if True:\n            out[:] = values",
              ("tests/test_adjoint_contact.py::test_body_parameters_are_the_scenes_values",),
              "a body's initial velocity parameter moves every body"),
     Mutation("adjoint-damping-alpha-not-refreshed", "fem_anim/adjoint/parameters.py",
@@ -1225,6 +1225,37 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_command_safety.py::test_a_signal_to_the_command_after_its_renderer_"
               "finished_says_so",),
              "Ctrl-C after the renderer finished says nothing was installed"),
+    # -- adjoint: initial spin and displacement (tests/test_adjoint_initial.py) ---------------
+    Mutation("adjoint-spin-basis-sign", "fem_anim/adjoint/parameters.py",
+             '        return [("v", self._spin_field(prefix, unit, self.centre(prefix)))]',
+             '        return [("v", self._spin_field(prefix, -unit, self.centre(prefix)))]',
+             ("tests/test_adjoint_initial.py::"
+              "test_gradient_equals_central_differences[beam-implicit_euler]",),
+             "the spin's basis omega x (X - c) with the wrong sign"),
+    Mutation("adjoint-spin-about-origin", "fem_anim/adjoint/parameters.py",
+             "        return center_of_mass(self.problem, body)\n",
+             "        return np.zeros(self.problem.d)\n",
+             ("tests/test_adjoint_initial.py::"
+              "test_spin_parameter_runs_the_scene_with_that_spin",),
+             "a spin parameter turns the body about the origin, not its centre of mass"),
+    Mutation("adjoint-centre-of-mass-fixed", "fem_anim/adjoint/parameters.py",
+             '        if kind == "material" and i == 2:\n            return self._centre_bases(where)\n',
+             "",
+             ("tests/test_adjoint_initial.py::"
+              "test_gradient_equals_central_differences[beam-bdf2]",),
+             "a spinning body's centre of mass taken as independent of a region's density"),
+    Mutation("adjoint-displacement-not-applied", "fem_anim/adjoint/tape.py",
+             "    state = State(u=parameters.displacement_offset(p), v=v0, a=np.zeros(n))",
+             "    state = State(u=np.zeros(n), v=v0, a=np.zeros(n))",
+             ("tests/test_adjoint_initial.py::"
+              "test_gradient_equals_central_differences[plane-implicit_euler]",),
+             "the initial displacement parameter not passed to the forward run"),
+    Mutation("adjoint-initial-acceleration-u0", "fem_anim/adjoint/backward.py",
+             '            bar0 = {"u": bar0["u"] + u_part, "v": bar0["v"] + v_part}',
+             '            bar0 = {"u": bar0["u"], "v": bar0["v"] + v_part}',
+             ("tests/test_adjoint_initial.py::"
+              "test_gradient_equals_central_differences[beam-newmark]",),
+             "Newmark's a_0 = M^-1 (f(u_0) - C v_0) taken as independent of u_0"),
 ]
 
 
