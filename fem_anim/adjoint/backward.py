@@ -26,6 +26,10 @@ sweep is the transpose of exactly the forward code. Newmark's a_0 solves
 M a_0 = -grad E(0) - C v_0 (seed eq. 1b) and is differentiated the same way, with M in
 place of H.
 
+Friction coefficients (obstacles' and IPC's mu) enter R linearly through the lagged
+friction potential D = mu D_1 (:mod:`fem_anim.adjoint.parameters`): an obstacle's as a
+stand-in coefficient like the material's, IPC's as -<w grad D / mu, lambda> from ipctk.
+
 Contact (seed eq. 4's E holds it): an obstacle's barrier and lagged friction are UFL terms
 of g, so H holds their exact Hessian and, friction's pressure and normal being lagged at
 u_n = ``u_prev``, -d<R, lambda>/du_prev joins the adjoint of u_n (exact). IPC's barrier
@@ -268,6 +272,8 @@ class BackwardSweep:
             y_bar = y_bar - self.vector("y")
             for name, value in self.material_bar("theta").items():
                 grad[name] += value
+            if "contact.friction" in grad:  # IPC's mu: R_mu = w grad D / mu
+                grad["contact.friction"] -= self._ipc_mu_bar()
             d_bar = -self.vector("d") if p.damped else None
             target = state_bars[n]
             for k in maps["inputs"]:
@@ -324,6 +330,18 @@ class BackwardSweep:
         local = np.zeros_like(self.lam.x.array)
         local.reshape(-1, ipc.gdim)[: rows.shape[0]] = rows
         return self.consistent(local)
+
+    def _ipc_mu_bar(self) -> float:
+        """<dR/dmu, lambda> of IPC's friction coefficient at the step's solution
+        (collective): D = mu D_1 with the normal forces and tangent bases lagged at x_n,
+        so dR/dmu = w grad D / mu, grad D the difference of ipctk's gradients with and
+        without friction."""
+        ipc, w = self.problem.ipc, float(self.problem.weight.value)
+        x = ipc._update()
+        rows = ipc._gradient_rows(x, w, True) - ipc._gradient_rows(x, w, False)
+        local = np.zeros_like(self.lam.x.array)
+        local.reshape(-1, ipc.gdim)[: rows.shape[0]] = rows
+        return self.dot(local, self.lam.x.array) / float(ipc.cfg["friction"])
 
     def _initial_acceleration(self, state: State, bar: dict,
                               grad: dict) -> tuple[np.ndarray, np.ndarray]:

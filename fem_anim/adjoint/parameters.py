@@ -22,6 +22,10 @@ A parameter is a scalar named by its scene key:
   at t = 0. It is not a scene key (scenes start at the rest shape): its value at the scene
   is 0, and the forward run of the adjoint starts from u_0.
 
+* the friction coefficients: ``obstacle.NAME.friction`` (mu of the ``[[obstacle]]`` named
+  NAME) and ``contact.friction`` (IPC's mu), each positive in the scene (with mu = 0 the
+  step has no friction term).
+
 The material constants enter g of seed eq. 4 through the Lamé parameters mu(E, nu),
 lambda(E, nu) and rho, per cell. Without regions or bodies the forward solver reads them as
 DOLFINx Constants, which ``ufl.derivative`` cannot differentiate, so :class:`ParameterSet`
@@ -50,7 +54,15 @@ initial displacement enters the first step's predictor, the lagged friction's x_
 Newmark's a_0 through grad E(u_0): its derivative is the adjoint of u_0 dotted with the
 translation field of each component.
 
-Constants of the contact terms are not parameters: an obstacle's barrier stiffness
+Friction is linear in mu for fixed lagged quantities (the pressure or normal forces and
+the tangent bases at x_n, which do not depend on mu): the lagged potential is
+D = mu D_1(x; x_n) (:func:`fem_anim.forms.obstacle_contact.friction_potential`, IPC's
+section 5), so dR/dmu = w grad D_1 = w grad D / mu. An obstacle's mu is a Constant of the
+friction form, replaced by a DG0 stand-in like the material's; IPC's is
+(grad of the barrier and friction) - (grad of the barrier) over mu, from ipctk
+(:mod:`fem_anim.adjoint.backward`).
+
+The other constants of the contact terms are not parameters: an obstacle's barrier stiffness
 (default: the scene's ``material.youngs_modulus`` when the problem is built) and d_hat, and
 IPC's kappa and d_hat, are held fixed (:mod:`fem_anim.adjoint.backward`).
 """
@@ -71,7 +83,8 @@ from fem_anim.forms.gravity import gravity_potential
 from fem_anim.forms.lame import lame_parameters
 from fem_anim.simulation.initial_state import center_of_mass, rigid_velocity
 
-__all__ = ["DAMPING_KEYS", "DISPLACEMENT_KEY", "INITIAL_KEYS", "MATERIAL_KEYS", "SPIN_KEY",
+__all__ = ["DAMPING_KEYS", "DISPLACEMENT_KEY", "INITIAL_KEYS", "IPC_FRICTION_KEY",
+           "MATERIAL_KEYS", "SPIN_KEY",
            "VELOCITY_KEY", "ParameterSet", "expand_keys", "refresh_constant_terms"]
 
 #: Material parameters: key -> the key inside ``[material]`` (after a group's prefix).
@@ -88,6 +101,13 @@ SPIN_KEY = "initial.angular_velocity"
 DISPLACEMENT_KEY = "initial.displacement"
 #: The initial-state parameters (vectors of a body or of the scene).
 INITIAL_KEYS = (VELOCITY_KEY, SPIN_KEY, DISPLACEMENT_KEY)
+#: IPC's friction coefficient (an obstacle's: ``obstacle.NAME.friction``).
+IPC_FRICTION_KEY = "contact.friction"
+
+
+def _is_obstacle_friction(key: str) -> bool:
+    return key.startswith("obstacle.") and key.endswith(".friction") and \
+        len(key) > len("obstacle..friction")
 
 
 def components(base: str, d: int) -> int:
@@ -127,7 +147,8 @@ def expand_keys(keys: list[str], d: int) -> list[str]:
     names: list[str] = []
     for key in keys:
         prefix, rest = _split_group(key)
-        if rest in MATERIAL_KEYS or (not prefix and rest in DAMPING_KEYS):
+        if rest in MATERIAL_KEYS or (not prefix and rest in DAMPING_KEYS) or \
+                key == IPC_FRICTION_KEY or _is_obstacle_friction(key):
             names.append(key)
         elif _component(rest)[0] in INITIAL_KEYS and not prefix.startswith("region.") and \
                 _component(rest)[1] in (None, *range(components(_component(rest)[0], d))) and \
@@ -140,7 +161,8 @@ def expand_keys(keys: list[str], d: int) -> list[str]:
             known = ", ".join([*MATERIAL_KEYS, *DAMPING_KEYS, *INITIAL_KEYS,
                                "body.NAME.material.KEY", "region.NAME.material.KEY",
                                "body.NAME.initial.velocity", "body.NAME.initial.angular_velocity",
-                               "body.NAME.initial.displacement"])
+                               "body.NAME.initial.displacement", "obstacle.NAME.friction",
+                               IPC_FRICTION_KEY])
             raise FemAnimError(f"--param {key}: not a parameter this scene can differentiate "
                                f"(one of {known})")
     if len(set(names)) != len(names):
@@ -212,6 +234,9 @@ class ParameterSet:
         #: (prefix, initial key) -> the current value (an array of its components)
         self.initial: dict[tuple[str, str], np.ndarray] = {}
         self._scene_initial: dict[tuple[str, str], np.ndarray] = {}
+        #: friction parameter name -> obstacle index ("contact" for IPC's), and its mu
+        self._friction_slot: dict[str, int | str] = {}
+        self.friction: dict[int | str, float] = {}
         for name in self.names:
             prefix, rest = _split_group(name)
             if rest in MATERIAL_KEYS:
@@ -223,6 +248,8 @@ class ParameterSet:
             elif rest in DAMPING_KEYS:
                 if not problem.damped:
                     raise FemAnimError(f"--param {name}: the scene has no [damping] section")
+            elif name == IPC_FRICTION_KEY or _is_obstacle_friction(name):
+                self._bind_friction(name, scene)
             else:
                 self._bind_initial(name, prefix, _component(rest)[0], bodies)
         self.damping = {k: float(getattr(problem, f"damping_{k}").value)
@@ -251,6 +278,11 @@ class ParameterSet:
                 f = fem.Function(W0, name=f"{name}_coefficient")
                 self.coefficients[name] = f
                 self.replacements[c] = f
+        for where in self.friction:  # obstacles' mu: Constants of the friction form
+            if where != "contact":
+                f = fem.Function(W0, name=f"friction{where}_coefficient")
+                self.coefficients[f"friction{where}"] = f
+                self.replacements[problem.contact.friction_coefficients[where]] = f
         self._gravity_gradient = None
         if problem.constant_terms is not None and problem.constant_terms.gradient is not None:
             self._gravity_gradient = fem.form(ufl.derivative(
@@ -274,6 +306,29 @@ class ParameterSet:
             for i, region in enumerate(scene.get("region") or []):
                 out[f"region.{region['name']}."] = i + 1
         return out
+
+    def _bind_friction(self, name: str, scene) -> None:
+        """The obstacle (or IPC) of a friction parameter; its mu must be positive."""
+        p = self.problem
+        if name == IPC_FRICTION_KEY:
+            if p.ipc is None:
+                raise FemAnimError(f"--param {name}: the scene has no [contact] section")
+            where, mu = "contact", float(p.ipc.cfg["friction"])
+            p.ipc.cfg = dict(p.ipc.cfg)  # the parameter's value, not the scene's table
+        else:
+            label = name[len("obstacle."):-len(".friction")]
+            found = [i for i, ob in enumerate(scene.get("obstacle") or [])
+                     if ob["name"] == label]
+            if len(found) != 1:
+                raise FemAnimError(f"--param {name}: the scene has no obstacle {label!r}"
+                                   if not found else f"--param {name}: {len(found)} "
+                                   f"obstacles are named {label!r}")
+            where, mu = found[0], float(scene["obstacle"][found[0]]["friction"])
+        if mu <= 0.0:
+            raise FemAnimError(f"--param {name}: the scene's friction is 0 (no friction term "
+                               "to differentiate): give it a positive starting value")
+        self._friction_slot[name] = where
+        self.friction[where] = mu
 
     def _bind_initial(self, name: str, prefix: str, base: str, bodies) -> None:
         """The scene's value and the dofs of an initial-state parameter's body."""
@@ -311,6 +366,8 @@ class ParameterSet:
                 ("youngs_modulus", "poisson_ratio", "density").index(MATERIAL_KEYS[rest])
         if rest in DAMPING_KEYS:
             return "damping", None, DAMPING_KEYS[rest]
+        if name in self._friction_slot:
+            return "friction", self._friction_slot[name], 0
         base, index = _component(rest)
         return "initial", (prefix, base), 0 if index is None else index
 
@@ -320,7 +377,8 @@ class ParameterSet:
         for name in self.names:
             kind, where, i = self._slot(name)
             out.append(self.table[where, i] if kind == "material" else
-                       self.damping[i] if kind == "damping" else self.initial[where][i])
+                       self.damping[i] if kind == "damping" else
+                       self.friction[where] if kind == "friction" else self.initial[where][i])
         return np.asarray(out, dtype=float)
 
     def assign(self, theta) -> None:
@@ -336,6 +394,8 @@ class ParameterSet:
                 self.table[where, i] = float(value)
             elif kind == "damping":
                 self.damping[i] = float(value)
+            elif kind == "friction":
+                self.friction[where] = float(value)
             else:
                 self.initial[where][i] = float(value)
         E, nu, rho = self.table.T
@@ -344,6 +404,9 @@ class ParameterSet:
                                f"nu = {nu.tolist()}, density = {rho.tolist()} kg/m^3")
         if any(v < 0.0 for v in self.damping.values()):
             raise FemAnimError(f"parameters out of range: damping {self.damping} is negative")
+        if any(v <= 0.0 for v in self.friction.values()):
+            raise FemAnimError(f"parameters out of range: friction {self.friction} is not "
+                               "positive")
         self._sync()
 
     def _sync(self) -> None:
@@ -353,6 +416,10 @@ class ParameterSet:
         values = {"mu": np.atleast_1d(mu), "lmbda": np.atleast_1d(lmbda),
                   "rho": self.table[:, 2]}
         values |= {k: np.array([v]) for k, v in self.damping.items()}
+        values |= {f"friction{k}": np.array([v]) for k, v in self.friction.items()
+                   if k != "contact"}
+        if "contact" in self.friction:
+            self.problem.ipc.cfg["friction"] = self.friction["contact"]
         changed = False
         for name, table in values.items():
             f = self.coefficients[name]
@@ -387,6 +454,9 @@ class ParameterSet:
         kind, where, i = self._slot(name)
         if kind == "damping":
             return MaterialDirection(None, [(i, 1.0)])
+        if kind == "friction":  # IPC's: None (fem_anim.adjoint.backward adds it)
+            return None if where == "contact" else \
+                MaterialDirection(None, [(f"friction{where}", 1.0)])
         if kind != "material":
             return None
         E, nu, _ = self.table[where]

@@ -1256,6 +1256,25 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint_initial.py::"
               "test_gradient_equals_central_differences[beam-newmark]",),
              "Newmark's a_0 = M^-1 (f(u_0) - C v_0) taken as independent of u_0"),
+    # -- adjoint: friction coefficients (tests/test_adjoint_friction.py) -----------------------
+    Mutation("adjoint-ipc-mu-sign", "fem_anim/adjoint/backward.py",
+             '                grad["contact.friction"] -= self._ipc_mu_bar()',
+             '                grad["contact.friction"] += self._ipc_mu_bar()',
+             ("tests/test_adjoint_friction.py::"
+              "test_gradient_equals_central_differences[implicit_euler-ipc]",),
+             "IPC's friction coefficient's derivative with +<dR/dmu, lambda>"),
+    Mutation("adjoint-ipc-mu-not-forwarded", "fem_anim/adjoint/parameters.py",
+             '            self.problem.ipc.cfg["friction"] = self.friction["contact"]\n',
+             "            pass\n",
+             ("tests/test_adjoint_friction.py::"
+              "test_friction_parameter_runs_the_scene_with_that_friction",),
+             "contact.friction changed in the parameters but not in IPC's friction"),
+    Mutation("adjoint-obstacle-mu-not-replaced", "fem_anim/adjoint/parameters.py",
+             "                self.replacements[problem.contact.friction_coefficients[where]] = f\n",
+             "",
+             ("tests/test_adjoint_friction.py::"
+              "test_gradient_equals_central_differences[implicit_euler-plane]",),
+             "an obstacle's mu left a Constant in the adjoint's forms: its derivative is 0"),
 ]
 
 
