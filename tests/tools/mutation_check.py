@@ -158,7 +158,7 @@ MUTATIONS: list[Mutation] = [
              (f"{CONTACT}::test_barrier_matches_reference[plane-3]",),
              "vertex rule without the reference facet's area 1/(d-1)!"),
     Mutation("friction-mu-half", "fem_anim/contact/obstacles.py",
-             'pressure, ob["friction"],', 'pressure, 0.5 * ob["friction"],',
+             'PETSc.ScalarType(ob["friction"]))', 'PETSc.ScalarType(0.5 * ob["friction"]))',
              (f"{CONTACT}::test_block_on_tilted_plane_sticks_or_slides[0.6-False]",),
              "friction coefficient halved: a block that must stick slides"),
     Mutation("keep-fraction", "fem_anim/contact/obstacles.py",
