@@ -25,13 +25,15 @@ DEFAULT_BOUNDS = {"material.youngs_modulus": ("factor", 1e-3, 1e3),
                   "material.density": ("factor", 1e-3, 1e3),
                   "material.poisson_ratio": ("absolute", -0.99, 0.499),
                   "damping.alpha": ("absolute", 0.0, None),
-                  "damping.beta": ("absolute", 0.0, None)}
+                  "damping.beta": ("absolute", 0.0, None),
+                  "friction": ("factor", 1e-3, 1e3)}
 
 
 def default_bounds(name: str, start: float) -> tuple[float | None, float | None]:
     """The bounds of a parameter without ``--bounds``: E and rho within a factor 1000 of
     the start, nu in (-0.99, 0.499) (a region's or body's too), damping coefficients
-    non-negative, velocities unbounded."""
+    non-negative, friction coefficients within a factor 1000 of the start, initial
+    velocities, spins and displacements unbounded."""
     kind = next((v for k, v in DEFAULT_BOUNDS.items() if name == k or
                  name.endswith("." + k)), None)
     if kind is None:
