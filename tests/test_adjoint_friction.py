@@ -98,6 +98,7 @@ def test_gradient_equals_central_differences(scene, integrator):
         fd.append((model.forward(up, obj) - model.forward(down, obj)) / (2.0 * eps))
     model.parameters.assign(theta)
     fd = theta * np.array(fd)  # sensitivities theta_i dJ/dtheta_i: comparable across units
+    assert abs(fd[0]) > 1e-3 * np.abs(fd).max()  # mu does move J (the forward sees it)
     np.testing.assert_allclose(theta * grad, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
 
 

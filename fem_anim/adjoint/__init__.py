@@ -24,4 +24,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "TrajectoryMatch": "objectives",
     "AdjointModel": "differentiate",
     "gradient": "differentiate",
+    "cell_functions": "cell_gradient",
+    "write_cell_gradient": "cell_gradient",
 })

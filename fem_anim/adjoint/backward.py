@@ -164,6 +164,11 @@ class BackwardSweep:
         self.owned = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
         #: Wall time (s) of the last sweep's Hessian assemblies and factorisations + solves.
         self.solve_s = {"assembly": 0.0, "solve": 0.0}
+        #: The last sweep's gradient per cell: parameter name -> dJ/dc on each owned DG0
+        #: dof (the parameter's value taken as cell-wise; zero off its cells), for the
+        #: parameters bound through the step's coefficients (materials, damping, an
+        #: obstacle's friction)
+        self.cell_gradient: dict[str, np.ndarray] = {}
 
     # -- helpers ------------------------------------------------------------------------
     def consistent(self, local: np.ndarray) -> np.ndarray:
@@ -235,8 +240,9 @@ class BackwardSweep:
             if direction is None:
                 continue
             mask = self.parameters.cell_mask(direction.group)
-            local = sum(factor * float(partial[c][mask].sum()) for c, factor in direction.terms)
-            out[name] = -self.problem.comm.allreduce(local, op=MPI.SUM)
+            cells = sum(factor * partial[c] for c, factor in direction.terms) * mask
+            self.cell_gradient[name] = self.cell_gradient.get(name, 0.0) - cells
+            out[name] = -self.problem.comm.allreduce(float(cells.sum()), op=MPI.SUM)
         return out
 
     # -- the sweep ----------------------------------------------------------------------
@@ -254,6 +260,7 @@ class BackwardSweep:
         """
         p, integ, h = self.problem, sim.integrator, tape.h
         self.solve_s = {"assembly": 0.0, "solve": 0.0}
+        self.cell_gradient = {}
         names = self.parameters.names
         grad = dict.fromkeys(names, 0.0)
         zero = np.zeros_like(tape.states[0].u)

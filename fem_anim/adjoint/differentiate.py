@@ -181,7 +181,7 @@ class AdjointModel:
 
 
 def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORLD,
-             cli_options: dict[str, str] | None = None) -> tuple[float, dict[str, float]]:
+             cli_options: dict[str, str] | None = None, per_cell: bool = False) -> tuple:
     """J and dJ/dtheta at the scene's own parameter values (collective).
 
     Args:
@@ -191,9 +191,12 @@ def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORL
         params: Scene keys, e.g. ``["material.youngs_modulus", "initial.velocity"]``.
         comm: MPI communicator.
         cli_options: PETSc options for the forward solver.
+        per_cell: Also return the gradient per cell (:mod:`fem_anim.adjoint.cell_gradient`).
 
     Returns:
-        J, and {parameter name: dJ/dparameter}.
+        J, and {parameter name: dJ/dparameter}; with ``per_cell`` also {parameter name:
+        DG0 Function of dJ/dtheta_c} for the parameters with one (materials, damping, an
+        obstacle's friction).
 
     Raises:
         FemAnimError: a parameter the scene does not have or a feature not covered.
@@ -201,4 +204,9 @@ def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORL
     """
     model = AdjointModel(scene, params, comm, cli_options)
     value, grad = model.evaluate(model.parameters.values(), objective)
-    return value, dict(zip(model.names, map(float, grad)))
+    grads = dict(zip(model.names, map(float, grad)))
+    if per_cell:
+        from fem_anim.adjoint.cell_gradient import cell_functions
+
+        return value, grads, cell_functions(model)
+    return value, grads

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fem_anim.adjoint.cell_gradient import owned_cell_values
+
 __all__ = ["DEFAULT_BOUNDS", "FitResult", "default_bounds", "fit"]
 
 #: Bounds relative to the start (factor range) or absolute, per parameter kind.
@@ -64,6 +66,8 @@ class FitResult:
     evaluations: int
     message: str
     history: list[dict] = field(default_factory=list)
+    #: The gradient per cell there (:func:`~fem_anim.adjoint.cell_gradient.owned_cell_values`)
+    cell_gradient: dict = field(default_factory=dict)
 
 
 def fit(model, objective, bounds: list[tuple[float | None, float | None]] | None = None,
@@ -106,7 +110,8 @@ def fit(model, objective, bounds: list[tuple[float | None, float | None]] | None
                  "gradient_norm": float(np.linalg.norm(grad)), "accepted": False}
         history.append(entry)
         if not best or value < best["value"]:
-            best.update(theta=theta.copy(), value=value, gradient=grad.copy())
+            best.update(theta=theta.copy(), value=value, gradient=grad.copy(),
+                        cells=owned_cell_values(model))
         if report is not None:
             report(entry)
         return value / reference[0], grad * scale / reference[0]
@@ -123,5 +128,6 @@ def fit(model, objective, bounds: list[tuple[float | None, float | None]] | None
                                "gtol": tolerance})
     model.parameters.assign(best["theta"])
     return FitResult(theta=best["theta"], value=best["value"], gradient=best["gradient"],
+                     cell_gradient=best["cells"],
                      iterations=int(result.nit), evaluations=len(history),
                      message=str(result.message), history=history)

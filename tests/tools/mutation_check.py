@@ -1275,6 +1275,19 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint_friction.py::"
               "test_gradient_equals_central_differences[implicit_euler-plane]",),
              "an obstacle's mu left a Constant in the adjoint's forms: its derivative is 0"),
+    # -- adjoint: the gradient per cell (tests/test_adjoint_cell_gradient.py) -----------------
+    Mutation("adjoint-cell-gradient-local-order", "fem_anim/adjoint/cell_gradient.py",
+             "    gathered = {name: gather.gather(v) for name, v in values.items()}",
+             "    gathered = dict(values)",
+             ("tests/test_adjoint_cell_gradient.py::"
+              "test_a_cells_value_is_the_derivative_by_that_cell_alone",),
+             "the per-cell gradient written in local cell order, not the input mesh's"),
+    Mutation("adjoint-cell-gradient-dof-order", "fem_anim/adjoint/cell_gradient.py",
+             "    return {name: np.asarray(values)[dofs] for name, values in",
+             "    return {name: np.asarray(values)[: dofs.size] for name, values in",
+             ("tests/test_adjoint_cell_gradient.py::"
+              "test_a_cells_value_is_the_derivative_by_that_cell_alone",),
+             "the DG0 dofs taken as numbered like the cells"),
 ]
 
 
