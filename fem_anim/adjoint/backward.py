@@ -26,6 +26,12 @@ sweep is the transpose of exactly the forward code. Newmark's a_0 solves
 M a_0 = -grad E(0) - C v_0 (seed eq. 1b) and is differentiated the same way, with M in
 place of H.
 
+A handle's velocity moves the pinned values of x: with lambda = 0 on the pins, the total
+adjoint of a pinned value is x_bar - H lambda there (the free dofs' response
+-H_ff^-1 H_fp), dotted with d u_D(t)/dtheta; with Newmark the handles' v and a are their
+exact rates (not the integrator's update), so their adjoint goes to the rates' derivative
+and not back through the update.
+
 Friction coefficients (obstacles' and IPC's mu) enter R linearly through the lagged
 friction potential D = mu D_1 (:mod:`fem_anim.adjoint.parameters`): an obstacle's as a
 stand-in coefficient like the material's, IPC's as -<w grad D / mu, lambda> from ipctk.
@@ -127,6 +133,11 @@ class BackwardSweep:
         self.lagged = p.contact is not None and p.contact.friction is not None
         if self.lagged:
             forms["prev"] = ufl.derivative(L, p.u_prev, dv)
+        #: handle-velocity parameters: the pinned values' adjoint needs H lambda off the pins
+        self.handles = parameters.handle_names
+        if self.handles:
+            forms["hlam"] = ufl.derivative(L, p.u, dv)
+            self.handle_dofs = parameters.handle_dofs()
         self.newmark = newmark
         if newmark:  # r0(a) = grad E(0) + C v_0 + M a = 0, and its action on mu
             self.a0 = fem.Function(V, name="initial_acceleration")
@@ -267,6 +278,8 @@ class BackwardSweep:
         for n in range(tape.steps - 1, -1, -1):
             start, end = tape.states[n], tape.states[n + 1]
             bar = {k: state_bars[n + 1].get(k, zero) for k in STATE_FIELDS}
+            if self.handles and self.newmark:  # the handles' v and a: their rates at t
+                bar = self._handle_rates_bar(bar, end.time, grad)
             maps = linear_maps(integ, h, start)
             U = maps["U"]
             x_bar = sum(U[o, "x"] * bar[o] for o in STATE_FIELDS)
@@ -276,6 +289,11 @@ class BackwardSweep:
             self.stage(sim, tape, n)
             p.u.x.array[:] = end.u
             self.solve("hessian", x_bar)
+            if self.handles:  # x's pinned values u_D(t): x_bar - H lambda there
+                pinned_bar = x_bar - self.vector("hlam")
+                for name in self.handles:
+                    grad[name] += self.dot(pinned_bar,
+                                           self.parameters.handle_bases(name, end.time)[0])
             y_bar = y_bar - self.vector("y")
             for name, value in self.material_bar("theta").items():
                 grad[name] += value
@@ -337,6 +355,18 @@ class BackwardSweep:
         local = np.zeros_like(self.lam.x.array)
         local.reshape(-1, ipc.gdim)[: rows.shape[0]] = rows
         return self.consistent(local)
+
+    def _handle_rates_bar(self, bar: dict, t: float, grad: dict) -> dict:
+        """Newmark puts the handles' exact rates at t into v and a at their nodes
+        (:meth:`fem_anim.problem.pins.Pins.prescribe_pin_rates`): adds the velocity
+        parameters' part and returns the adjoint with those entries cut from the update."""
+        for name in self.handles:
+            grad[name] += self.dot(bar["v"], self.parameters.handle_bases(name, t)[1])
+        bar = dict(bar)
+        for k in ("v", "a"):
+            bar[k] = bar[k].copy()
+            bar[k][self.handle_dofs] = 0.0
+        return bar
 
     def _ipc_mu_bar(self) -> float:
         """<dR/dmu, lambda> of IPC's friction coefficient at the step's solution

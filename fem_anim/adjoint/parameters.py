@@ -22,6 +22,12 @@ A parameter is a scalar named by its scene key:
   at t = 0. It is not a scene key (scenes start at the rest shape): its value at the scene
   is 0, and the forward run of the adjoint starts from u_0.
 
+* a handle's velocity ``pin.NAME.velocity`` (m/s; d components) of a ``[[pin]]`` that
+  moves in the scene (``velocity`` or ``angular_velocity`` given; a body's pin:
+  ``body.B.pin.NAME.velocity``): its prescribed displacement at t is the rotation part plus
+  velocity min(t, until), so d u_D(t)/d velocity_i = min(t, until) e_i on the pin's nodes
+  (and, with Newmark, whose pinned v and a are the handle's exact rates, dv/d velocity_i
+  = e_i while it moves);
 * the friction coefficients: ``obstacle.NAME.friction`` (mu of the ``[[obstacle]]`` named
   NAME) and ``contact.friction`` (IPC's mu), each positive in the scene (with mu = 0 the
   step has no friction term).
@@ -105,6 +111,20 @@ INITIAL_KEYS = (VELOCITY_KEY, SPIN_KEY, DISPLACEMENT_KEY)
 IPC_FRICTION_KEY = "contact.friction"
 
 
+def _handle_prefix(key: str) -> str | None:
+    """``pin.NAME.`` or ``body.B.pin.NAME.`` of a handle-velocity key (with or without a
+    component), else None."""
+    base = _component(key)[0]
+    if not base.endswith(".velocity"):
+        return None
+    head = base[: -len("velocity")]
+    if head.startswith("pin.") and len(head) > len("pin.."):
+        return head
+    if head.startswith("body.") and ".pin." in head and not head.endswith(".pin."):
+        return head
+    return None
+
+
 def _is_obstacle_friction(key: str) -> bool:
     return key.startswith("obstacle.") and key.endswith(".friction") and \
         len(key) > len("obstacle..friction")
@@ -150,6 +170,10 @@ def expand_keys(keys: list[str], d: int) -> list[str]:
         if rest in MATERIAL_KEYS or (not prefix and rest in DAMPING_KEYS) or \
                 key == IPC_FRICTION_KEY or _is_obstacle_friction(key):
             names.append(key)
+        elif _handle_prefix(key) is not None and \
+                _component(key)[1] in (None, *range(d)):
+            names.extend([key] if _component(key)[1] is not None else
+                         [f"{key}[{i}]" for i in range(d)])
         elif _component(rest)[0] in INITIAL_KEYS and not prefix.startswith("region.") and \
                 _component(rest)[1] in (None, *range(components(_component(rest)[0], d))) and \
                 not (_component(rest)[1] is not None and components(_component(rest)[0], d) == 1):
@@ -161,7 +185,8 @@ def expand_keys(keys: list[str], d: int) -> list[str]:
             known = ", ".join([*MATERIAL_KEYS, *DAMPING_KEYS, *INITIAL_KEYS,
                                "body.NAME.material.KEY", "region.NAME.material.KEY",
                                "body.NAME.initial.velocity", "body.NAME.initial.angular_velocity",
-                               "body.NAME.initial.displacement", "obstacle.NAME.friction",
+                               "body.NAME.initial.displacement", "pin.NAME.velocity",
+                               "body.NAME.pin.P.velocity", "obstacle.NAME.friction",
                                IPC_FRICTION_KEY])
             raise FemAnimError(f"--param {key}: not a parameter this scene can differentiate "
                                f"(one of {known})")
@@ -236,10 +261,17 @@ class ParameterSet:
         self._scene_initial: dict[tuple[str, str], np.ndarray] = {}
         #: friction parameter name -> obstacle index ("contact" for IPC's), and its mu
         self._friction_slot: dict[str, int | str] = {}
+        #: handle prefix (``pin.NAME.``) -> index in the problem's ``moving_pins``, and the
+        #: handle's velocity (current and the scene's)
+        self._handle_index: dict[str, int] = {}
+        self.handle: dict[str, np.ndarray] = {}
+        self._scene_handle: dict[str, np.ndarray] = {}
         self.friction: dict[int | str, float] = {}
         for name in self.names:
             prefix, rest = _split_group(name)
-            if rest in MATERIAL_KEYS:
+            if _handle_prefix(name) is not None:
+                self._bind_handle(name, _handle_prefix(name), scene)
+            elif rest in MATERIAL_KEYS:
                 if prefix not in self._groups:
                     kind, _, group = prefix[:-1].partition(".")
                     raise FemAnimError(f"--param {name}: the scene has no {kind} {group!r}"
@@ -307,6 +339,36 @@ class ParameterSet:
                 out[f"region.{region['name']}."] = i + 1
         return out
 
+    def _bind_handle(self, name: str, prefix: str, scene) -> None:
+        """The moving pin of a handle-velocity parameter."""
+        from fem_anim.mesh.bodies import body_pins
+
+        if prefix in self._handle_index:
+            return
+        p = self.problem
+        if p.ipc is not None:
+            raise FemAnimError(f"--param {name}: a handle's velocity with IPC contact "
+                               "([contact]) is not differentiable yet")
+        moving, found = 0, []
+        for body, _, pin in body_pins(scene):
+            label = f"pin.{pin['name']}." if body is None else f"body.{body}.pin.{pin['name']}."
+            is_moving = pin["velocity"] is not None or pin["angular_velocity"] != 0
+            if label == prefix:
+                found.append((moving if is_moving else None, pin))
+            moving += is_moving
+        if len(found) != 1:
+            raise FemAnimError(f"--param {name}: the scene has no pin {prefix[:-1]!r}"
+                               if not found else f"--param {name}: {len(found)} pins are "
+                               f"named {prefix[:-1]!r}")
+        index, pin = found[0]
+        if index is None:
+            raise FemAnimError(f"--param {name}: pin {pin['name']!r} does not move (give it "
+                               "a velocity or angular_velocity to make it a handle)")
+        self._handle_index[prefix] = index
+        value = np.array(p.moving_pins[index].velocity, dtype=float)
+        self.handle[prefix] = value.copy()
+        self._scene_handle[prefix] = value.copy()
+
     def _bind_friction(self, name: str, scene) -> None:
         """The obstacle (or IPC) of a friction parameter; its mu must be positive."""
         p = self.problem
@@ -368,6 +430,8 @@ class ParameterSet:
             return "damping", None, DAMPING_KEYS[rest]
         if name in self._friction_slot:
             return "friction", self._friction_slot[name], 0
+        if _handle_prefix(name) is not None:
+            return "handle", _handle_prefix(name), _component(name)[1]
         base, index = _component(rest)
         return "initial", (prefix, base), 0 if index is None else index
 
@@ -378,7 +442,8 @@ class ParameterSet:
             kind, where, i = self._slot(name)
             out.append(self.table[where, i] if kind == "material" else
                        self.damping[i] if kind == "damping" else
-                       self.friction[where] if kind == "friction" else self.initial[where][i])
+                       self.friction[where] if kind == "friction" else
+                       self.handle[where][i] if kind == "handle" else self.initial[where][i])
         return np.asarray(out, dtype=float)
 
     def assign(self, theta) -> None:
@@ -396,6 +461,8 @@ class ParameterSet:
                 self.damping[i] = float(value)
             elif kind == "friction":
                 self.friction[where] = float(value)
+            elif kind == "handle":
+                self.handle[where][i] = float(value)
             else:
                 self.initial[where][i] = float(value)
         E, nu, rho = self.table.T
@@ -420,6 +487,8 @@ class ParameterSet:
                    if k != "contact"}
         if "contact" in self.friction:
             self.problem.ipc.cfg["friction"] = self.friction["contact"]
+        for prefix, index in self._handle_index.items():
+            self.problem.moving_pins[index].velocity[:] = self.handle[prefix]
         changed = False
         for name, table in values.items():
             f = self.coefficients[name]
@@ -439,7 +508,9 @@ class ParameterSet:
         out: dict = {}
         for name, value in zip(self.names, self.values()):
             kind, where, _ = self._slot(name)
-            if kind == "initial":
+            if kind == "handle":
+                out[where + "velocity"] = [float(v) for v in self.handle[where]]
+            elif kind == "initial":
                 vector = [float(v) for v in self.initial[where]]
                 out[where[0] + where[1]] = vector[0] if components(where[1], self.problem.d) \
                     == 1 else vector
@@ -562,6 +633,32 @@ class ParameterSet:
                                    np.zeros(p.d))[0]
             out.append(("v", self._field(prefix, shift)))
         return out
+
+    @property
+    def handle_names(self) -> list[str]:
+        """The handle-velocity parameters."""
+        return [n for n in self.names if _handle_prefix(n) is not None]
+
+    def handle_dofs(self) -> np.ndarray:
+        """The local dofs (all components) of the handles' nodes (all moving pins)."""
+        d = self.problem.d
+        nodes = [m.dofs for m in self.problem.moving_pins] + [np.empty(0, np.int32)]
+        nodes = np.concatenate(nodes).astype(np.int64)
+        return (nodes[:, None] * d + np.arange(d)).reshape(-1)
+
+    def handle_bases(self, name: str, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(d u_D(t)/dtheta, d v_D(t)/dtheta) of a handle-velocity component at time t on
+        the handle's nodes (local dof arrays): min(t, until) e_i, and e_i while the handle
+        moves (the test of :meth:`fem_anim.problem.handles.PinMotion.rates`)."""
+        _, prefix, i = self._slot(name)
+        motion = self.problem.moving_pins[self._handle_index[prefix]]
+        d = self.problem.d
+        disp = np.zeros((self.problem.u.x.array.size // d, d))
+        rate = np.zeros_like(disp)
+        disp[motion.dofs, i] = min(t, motion.until)
+        if t < motion.until * (1.0 - 1e-12):
+            rate[motion.dofs, i] = 1.0
+        return disp.reshape(-1), rate.reshape(-1)
 
     def velocity_offset(self, problem) -> np.ndarray:
         """v_0 minus the scene's v_0: the velocity and spin parameters' change (local dofs;

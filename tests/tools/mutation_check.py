@@ -1288,6 +1288,30 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint_cell_gradient.py::"
               "test_a_cells_value_is_the_derivative_by_that_cell_alone",),
              "the DG0 dofs taken as numbered like the cells"),
+    # -- adjoint: a handle's velocity (tests/test_adjoint_handles.py) --------------------------
+    Mutation("adjoint-handle-free-response-dropped", "fem_anim/adjoint/backward.py",
+             '                pinned_bar = x_bar - self.vector("hlam")',
+             "                pinned_bar = x_bar",
+             ("tests/test_adjoint_handles.py::"
+              "test_gradient_equals_central_differences[beam-implicit_euler]",),
+             "a handle's pinned values taken without the free dofs' response (-H lambda)"),
+    Mutation("adjoint-handle-rates-through-update", "fem_anim/adjoint/backward.py",
+             "                bar = self._handle_rates_bar(bar, end.time, grad)\n",
+             "                pass\n",
+             ("tests/test_adjoint_handles.py::"
+              "test_gradient_equals_central_differences[beam-newmark]",),
+             "Newmark's handle rates treated as the integrator's update of v and a"),
+    Mutation("adjoint-handle-until-ignored", "fem_anim/adjoint/parameters.py",
+             "        disp[motion.dofs, i] = min(t, motion.until)",
+             "        disp[motion.dofs, i] = t",
+             ("tests/test_adjoint_handles.py::test_a_handle_that_stops_within_the_run",),
+             "a handle's displacement taken as velocity t after it stopped"),
+    Mutation("adjoint-handle-not-forwarded", "fem_anim/adjoint/parameters.py",
+             "            self.problem.moving_pins[index].velocity[:] = self.handle[prefix]\n",
+             "            pass\n",
+             ("tests/test_adjoint_handles.py::"
+              "test_handle_parameter_runs_the_scene_with_that_velocity",),
+             "pin.NAME.velocity changed in the parameters but not in the handle's motion"),
 ]
 
 
