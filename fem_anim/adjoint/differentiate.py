@@ -9,7 +9,8 @@ states (:mod:`fem_anim.adjoint.tape`), evaluates the objective
 (:mod:`fem_anim.adjoint.objectives`) and sweeps back for dJ/dtheta. :func:`gradient` is the
 one-call form at the scene's own values.
 
-What is differentiated: implicit Euler, BDF2 and Newmark; the displacement formulation with
+What is differentiated (the parameters: :mod:`fem_anim.adjoint.parameters`): implicit
+Euler, BDF2 and Newmark; the displacement formulation with
 materials whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...), per
 region and per body; gravity, Rayleigh damping, pins and moving handles; with implicit
 Euler and BDF2 also obstacles and IPC contact, barrier and lagged friction, exactly
