@@ -1239,7 +1239,8 @@ MUTATIONS: list[Mutation] = [
               "test_spin_parameter_runs_the_scene_with_that_spin",),
              "a spin parameter turns the body about the origin, not its centre of mass"),
     Mutation("adjoint-centre-of-mass-fixed", "fem_anim/adjoint/parameters.py",
-             '        if kind == "material" and i == 2:\n            return self._centre_bases(where)\n',
+             '        if kind == "material" and i == 2:\n'
+             '            return self._centre_bases(where)\n',
              "",
              ("tests/test_adjoint_initial.py::"
               "test_gradient_equals_central_differences[beam-bdf2]",),
@@ -1270,7 +1271,8 @@ MUTATIONS: list[Mutation] = [
               "test_friction_parameter_runs_the_scene_with_that_friction",),
              "contact.friction changed in the parameters but not in IPC's friction"),
     Mutation("adjoint-obstacle-mu-not-replaced", "fem_anim/adjoint/parameters.py",
-             "                self.replacements[problem.contact.friction_coefficients[where]] = f\n",
+             "                self.replacements[problem.contact.friction_coefficients[where]]"
+             " = f\n",
              "",
              ("tests/test_adjoint_friction.py::"
               "test_gradient_equals_central_differences[implicit_euler-plane]",),
