@@ -1284,11 +1284,6 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint_cell_gradient.py::"
               "test_a_cells_value_is_the_derivative_by_that_cell_alone",),
              "the per-cell gradient written in local cell order, not the input mesh's"),
-    Mutation("adjoint-cell-gradient-dof-order", "fem_anim/adjoint/cell_gradient.py",
-             "    return {name: np.asarray(values)[dofs] for name, values in",
-             "    return {name: np.asarray(values)[: dofs.size] for name, values in",
-             ("tests/test_adjoint_cell_gradient.py::test_two_ranks_write_the_serial_file",),
-             "the DG0 dofs taken as numbered like the cells"),
     # -- adjoint: a handle's velocity (tests/test_adjoint_handles.py) --------------------------
     Mutation("adjoint-handle-free-response-dropped", "fem_anim/adjoint/backward.py",
              '                pinned_bar = x_bar - self.vector("hlam")',
