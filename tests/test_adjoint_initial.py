@@ -13,6 +13,9 @@ nodes) and a body's ``body.NAME.initial.*``; and a region's density while the bo
   displacement), a Taylor test each (BDF2's slow-marked) and central differences to 1e-6;
 * a plane-strain strip (2D: the spin is one number) against central differences;
 * the spin set in the model runs what the scene with that spin runs;
+* a per-node u_0 and v_0 (``AdjointModel.set_initial_fields``) and their gradient
+  (``initial_gradient``): a Taylor test along a smooth field, without and with contact, and
+  its sums over the rigid fields are the rigid parameters' gradients;
 * 2 ranks give the serial J and gradient to 1e-8 (this file run under ``mpirun -n 2``);
 * bad input: one clear error (``fem-anim fit``: one line, exit code 2).
 """
@@ -155,6 +158,61 @@ def test_gradient_equals_central_differences(scene, integrator):
     np.testing.assert_allclose(scale * grad, fd, rtol=1e-6, atol=1e-6 * np.abs(fd).max())
 
 
+def smooth_field(model, scale: float) -> np.ndarray:
+    """A smooth per-node field (the same at a node on every rank: from its coordinates)."""
+    X = model.problem.V.tabulate_dof_coordinates()[:, : model.problem.d]
+    field = np.stack([np.sin(3.0 * X[:, 0] + k) * np.cos(2.0 * X[:, 1] - k)
+                      for k in range(model.problem.d)], axis=1)
+    return scale * field.reshape(-1)
+
+
+NODAL = [("beam", i) for i in ("implicit_euler", "bdf2", "newmark")] + \
+    [("plane", "implicit_euler"), ("plane_friction", "bdf2")]
+
+
+@pytest.mark.parametrize("scene,integrator", NODAL)
+@pytest.mark.parametrize("field,scale", [("u", 0.01), ("v", 0.3)])
+def test_per_node_initial_state_taylor(scene, integrator, field, scale):
+    """``set_initial_fields`` adds a per-node u_0 or v_0; ``initial_gradient`` is its
+    gradient: a Taylor test along a smooth field."""
+    model, obj = model_for(scene, integrator), SCENES[scene][2]()
+    theta = model.parameters.values()
+    J0, _ = model.evaluate(theta, obj)
+    grad = model.initial_gradient[field].copy()
+    delta = smooth_field(model, scale * (SCALE[scene] if scene != "beam" else 1.0) *
+                         (CONTACT_DISPLACEMENT if scene != "beam" and field == "u" else 1.0))
+    slope = model.sweep.dot(grad, delta)
+    first, second = [], []
+    try:
+        for k in range(5):
+            eps = 0.5 ** (k + 1)
+            model.set_initial_fields(**{field: eps * delta})
+            J = model.forward(theta, obj)
+            first.append(J - J0)
+            second.append(J - J0 - eps * slope)
+    finally:
+        model.set_initial_fields()
+    assert abs(orders(first)[-1] - 1.0) < 0.1, (first, orders(first))
+    assert orders(second)[-1] >= 1.9 and orders(second)[-2] > 1.5, (second, orders(second))
+
+
+def test_per_node_gradient_holds_the_rigid_ones():
+    """dJ/d(initial.displacement[i]) is dJ/du_0 summed over the unpinned nodes' i-th
+    components (the rigid field of component i)."""
+    model, obj = model_for("beam", "bdf2"), objective()
+    theta = model.parameters.values()
+    _, grad = model.evaluate(theta, obj)
+    G = model.initial_gradient
+    for i in range(3):
+        e = np.zeros((G["u"].size // 3, 3))
+        e[:, i] = 1.0
+        rigid = model.sweep.dot(G["u"], e.reshape(-1))
+        assert rigid == pytest.approx(grad[model.names.index(f"initial.displacement[{i}]")],
+                                      rel=1e-10)
+    with pytest.raises(FemAnimError, match="shape"):
+        model.set_initial_fields(u=np.zeros(5))
+
+
 def test_spin_in_2d_is_one_number():
     d = {"mesh": {"dim": 2, "size": [1.0, 0.2], "divisions": [16, 2]},
          "material": {"youngs_modulus": 1.0e4, "poisson_ratio": 0.3, "density": 1000.0},
@@ -236,7 +294,9 @@ def mpi_gradients() -> dict:
     for scene, integrator in (("beam", "newmark"), ("ipc", "implicit_euler")):
         model = model_for(scene, integrator)
         J, grad = model.evaluate(model.parameters.values(), SCENES[scene][2]())
-        out[scene] = {"J": J, "grad": list(map(float, grad))}
+        nodal = [model.sweep.dot(model.initial_gradient[k], smooth_field(model, 1.0))
+                 for k in ("u", "v")]
+        out[scene] = {"J": J, "grad": list(map(float, grad)) + nodal}
     return out
 
 

@@ -314,6 +314,10 @@ class BackwardSweep:
         if self.newmark:
             u_part, v_part = self._initial_acceleration(tape.states[0], state_bars[0], grad)
             bar0 = {"u": bar0["u"] + u_part, "v": bar0["v"] + v_part}
+        #: dJ/du_0 and dJ/dv_0 per dof (consistent local arrays; zero on pinned dofs)
+        self.initial_bar = {k: a.copy() for k, a in bar0.items()}
+        for a in self.initial_bar.values():
+            a[self.pinned] = 0.0
         for name in names:  # u_0 and v_0's dependence on the parameters
             for field, basis in self.parameters.initial_bases(name, p):
                 grad[name] += self.dot(bar0[field], basis)

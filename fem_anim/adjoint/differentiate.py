@@ -173,6 +173,32 @@ class AdjointModel:
         self.timing["backward"] = time.perf_counter() - start
         return float(value), grad
 
+    def set_initial_fields(self, u: np.ndarray | None = None,
+                           v: np.ndarray | None = None) -> None:
+        """Per-node initial displacement ``u`` and velocity ``v`` added to the scene's (and
+        the parameters') u_0 and v_0 in the next runs (local dof arrays of V, ghosts
+        included, e.g. ``model.problem.u.x.array``-shaped; pinned entries are ignored;
+        None: none). Their gradient is :attr:`initial_gradient`."""
+        pinned = self.sweep.pinned
+        for key, field in (("u", u), ("v", v)):
+            if field is None:
+                self.parameters.nodal[key] = None
+                continue
+            field = np.array(field, dtype=float)
+            if field.shape != self.problem.u.x.array.shape:
+                raise FemAnimError(f"set_initial_fields: {key} has shape {field.shape}, the "
+                                   f"displacement's local dofs {self.problem.u.x.array.shape}")
+            field[pinned] = 0.0
+            self.parameters.nodal[key] = field
+
+    @property
+    def initial_gradient(self) -> dict[str, np.ndarray]:
+        """The last evaluation's dJ/du_0 and dJ/dv_0 per dof (``"u"``, ``"v"``: local dof
+        arrays of V, ghosts equal to their owners, zero on pinned dofs): the gradient with
+        respect to a per-node initial state (:meth:`set_initial_fields`). Sum products
+        over the owned entries only (``model.sweep.dot``)."""
+        return self.sweep.initial_bar
+
     def bind(self, objective) -> None:
         """Prepare an objective for this model, once (collective; raises its bad input,
         e.g. a target run on another mesh)."""

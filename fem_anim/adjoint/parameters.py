@@ -259,6 +259,10 @@ class ParameterSet:
         #: (prefix, initial key) -> the current value (an array of its components)
         self.initial: dict[tuple[str, str], np.ndarray] = {}
         self._scene_initial: dict[tuple[str, str], np.ndarray] = {}
+        #: Per-node fields added to u_0 and v_0 (local dof arrays; None: none), the Python
+        #: API's per-node initial state (:meth:`~fem_anim.adjoint.differentiate.AdjointModel.
+        #: set_initial_fields`); zero on pinned dofs
+        self.nodal: dict[str, np.ndarray | None] = {"u": None, "v": None}
         #: friction parameter name -> obstacle index ("contact" for IPC's), and its mu
         self._friction_slot: dict[str, int | str] = {}
         #: handle prefix (``pin.NAME.``) -> index in the problem's ``moving_pins``, and the
@@ -670,7 +674,7 @@ class ParameterSet:
                 out += self._field(prefix, delta)
             elif base == SPIN_KEY and np.any(delta):
                 out += self._spin_field(prefix, delta, self.centre(prefix))
-        return out
+        return out if self.nodal["v"] is None else out + self.nodal["v"]
 
     def displacement_offset(self, problem) -> np.ndarray:
         """u_0: the initial displacement parameters' translations (local dofs)."""
@@ -678,4 +682,4 @@ class ParameterSet:
         for (prefix, base), value in self.initial.items():
             if base == DISPLACEMENT_KEY and np.any(value):
                 out += self._field(prefix, value)
-        return out
+        return out if self.nodal["u"] is None else out + self.nodal["u"]

@@ -1308,6 +1308,12 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint_handles.py::"
               "test_handle_parameter_runs_the_scene_with_that_velocity",),
              "pin.NAME.velocity changed in the parameters but not in the handle's motion"),
+    Mutation("adjoint-nodal-displacement-not-applied", "fem_anim/adjoint/parameters.py",
+             '        return out if self.nodal["u"] is None else out + self.nodal["u"]',
+             "        return out",
+             ("tests/test_adjoint_initial.py::"
+              "test_per_node_initial_state_taylor[u-0.01-beam-implicit_euler]",),
+             "a per-node initial displacement not passed to the forward run"),
 ]
 
 
