@@ -5,7 +5,7 @@ friction.
 
 For the scenes of ``tests/test_adjoint_initial.py``, ``tests/test_adjoint_friction.py`` and
 ``tests/test_adjoint_handles.py``: per parameter the adjoint gradient, central differences
-(step 1e-5 max(|theta|, 0.1)) and their relative distance; then, on the spinning cube with
+(step 1e-5 max(|theta|, 0.1), 1e-7 m for a displacement) and their relative distance; then, on the spinning cube with
 friction 0.5, the central differences of J in the initial z displacement at steps 1e-4 to
 1e-7 m with eps_v = 0.02 and 0.2 m/s, against the adjoint.
 
@@ -53,8 +53,9 @@ def main() -> None:
         obj = objective()
         theta = model.parameters.values()
         _, grad = model.evaluate(theta, obj)
-        fd = np.array([differences(model, obj, theta, i, 1e-5 * max(abs(theta[i]), 0.1))
-                       for i in range(theta.size)])
+        fd = np.array([differences(model, obj, theta, i, 1e-7 if "displacement" in name
+                                   else 1e-5 * max(abs(theta[i]), 0.1))
+                       for i, name in enumerate(model.names)])
         model.parameters.assign(theta)
         print(f"{label}, {integrator}: |g - fd|/|fd| = "
               f"{np.linalg.norm(grad - fd) / np.linalg.norm(fd):.1e}")
