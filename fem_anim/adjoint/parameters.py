@@ -157,6 +157,17 @@ def _split_group(key: str) -> tuple[str, str]:
     return "", key
 
 
+def _valid_index(index: int | None, n: int) -> bool:
+    """A component index of a vector of n scalars (None: the whole vector; a 1-vector, the
+    2D spin, has no index)."""
+    return index is None or (n > 1 and 0 <= index < n)
+
+
+def _scalars(key: str, index: int | None, n: int) -> list[str]:
+    """The scalar names of a vector key: itself (a component or a 1-vector) or KEY[i]."""
+    return [key] if index is not None or n == 1 else [f"{key}[{i}]" for i in range(n)]
+
+
 def expand_keys(keys: list[str], d: int) -> list[str]:
     """Scalar parameter names from scene keys (``...initial.velocity`` -> its d components).
 
@@ -170,17 +181,12 @@ def expand_keys(keys: list[str], d: int) -> list[str]:
         if rest in MATERIAL_KEYS or (not prefix and rest in DAMPING_KEYS) or \
                 key == IPC_FRICTION_KEY or _is_obstacle_friction(key):
             names.append(key)
-        elif _handle_prefix(key) is not None and \
-                _component(key)[1] in (None, *range(d)):
-            names.extend([key] if _component(key)[1] is not None else
-                         [f"{key}[{i}]" for i in range(d)])
+        elif _handle_prefix(key) is not None and _valid_index(_component(key)[1], d):
+            names.extend(_scalars(key, _component(key)[1], d))
         elif _component(rest)[0] in INITIAL_KEYS and not prefix.startswith("region.") and \
-                _component(rest)[1] in (None, *range(components(_component(rest)[0], d))) and \
-                not (_component(rest)[1] is not None and components(_component(rest)[0], d) == 1):
+                _valid_index(_component(rest)[1], components(_component(rest)[0], d)):
             base, index = _component(rest)
-            n = components(base, d)
-            names.extend([key] if index is not None or n == 1 else
-                         [f"{key}[{i}]" for i in range(n)])
+            names.extend(_scalars(key, index, components(base, d)))
         else:
             known = ", ".join([*MATERIAL_KEYS, *DAMPING_KEYS, *INITIAL_KEYS,
                                "body.NAME.material.KEY", "region.NAME.material.KEY",
