@@ -42,12 +42,14 @@ def build_fit_parser() -> OneLineParser:
     parser.add_argument("--param", action="append", required=True, metavar="KEY",
                         help="a scene key to fit (material.youngs_modulus, "
                         "material.poisson_ratio, material.density, damping.alpha, "
-                        "damping.beta, initial.velocity; a body's or region's: "
+                        "damping.beta, initial.velocity, initial.angular_velocity, "
+                        "initial.displacement, pin.NAME.velocity, obstacle.NAME.friction, "
+                        "contact.friction; a body's or region's: "
                         "body.NAME.material.youngs_modulus, region.NAME.material.density, "
-                        "body.NAME.initial.velocity, ...)")
+                        "body.NAME.initial.velocity, ...; docs/gradients.md lists them)")
     parser.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW,HIGH",
-                        help="bounds of a parameter (default: E and rho within x1000 of the "
-                        "start, nu in (-0.99, 0.499))")
+                        help="bounds of a parameter (default: E, rho and friction within "
+                        "x1000 of the start, nu in (-0.99, 0.499))")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="override a scene key (value parsed as TOML)")
     parser.add_argument("--max-iterations", type=int, default=30,
