@@ -1,7 +1,8 @@
 """Gradients through the simulation: the discrete adjoint of the time-stepping.
 
 :mod:`~fem_anim.adjoint.parameters` binds what can be differentiated (material constants,
-density, the initial velocity) into the step objective; :mod:`~fem_anim.adjoint.tape` runs
+density, damping, the initial velocity, spin and displacement, friction coefficients) into
+the step objective; :mod:`~fem_anim.adjoint.tape` runs
 and keeps the forward states; :mod:`~fem_anim.adjoint.backward` sweeps back through the
 steps with the exact Hessian of each converged step; :mod:`~fem_anim.adjoint.objectives`
 says what is measured; :mod:`~fem_anim.adjoint.differentiate` ties them into
@@ -23,4 +24,6 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "TrajectoryMatch": "objectives",
     "AdjointModel": "differentiate",
     "gradient": "differentiate",
+    "cell_functions": "cell_gradient",
+    "write_cell_gradient": "cell_gradient",
 })

@@ -26,6 +26,16 @@ sweep is the transpose of exactly the forward code. Newmark's a_0 solves
 M a_0 = -grad E(0) - C v_0 (seed eq. 1b) and is differentiated the same way, with M in
 place of H.
 
+A handle's velocity moves the pinned values of x: with lambda = 0 on the pins, the total
+adjoint of a pinned value is x_bar - H lambda there (the free dofs' response
+-H_ff^-1 H_fp), dotted with d u_D(t)/dtheta; with Newmark the handles' v and a are their
+exact rates (not the integrator's update), so their adjoint goes to the rates' derivative
+and not back through the update.
+
+Friction coefficients (obstacles' and IPC's mu) enter R linearly through the lagged
+friction potential D = mu D_1 (:mod:`fem_anim.adjoint.parameters`): an obstacle's as a
+stand-in coefficient like the material's, IPC's as -<w grad D / mu, lambda> from ipctk.
+
 Contact (seed eq. 4's E holds it): an obstacle's barrier and lagged friction are UFL terms
 of g, so H holds their exact Hessian and, friction's pressure and normal being lagged at
 u_n = ``u_prev``, -d<R, lambda>/du_prev joins the adjoint of u_n (exact). IPC's barrier
@@ -123,6 +133,11 @@ class BackwardSweep:
         self.lagged = p.contact is not None and p.contact.friction is not None
         if self.lagged:
             forms["prev"] = ufl.derivative(L, p.u_prev, dv)
+        #: handle-velocity parameters: the pinned values' adjoint needs H lambda off the pins
+        self.handles = parameters.handle_names
+        if self.handles:
+            forms["hlam"] = ufl.derivative(L, p.u, dv)
+            self.handle_dofs = parameters.handle_dofs()
         self.newmark = newmark
         if newmark:  # r0(a) = grad E(0) + C v_0 + M a = 0, and its action on mu
             self.a0 = fem.Function(V, name="initial_acceleration")
@@ -138,6 +153,7 @@ class BackwardSweep:
                 r0 = r0 + ufl.derivative(p._dissipation(p.v, zero, 1.0), p.v, dv)
             L0 = ufl.action(ufl.replace(r0, rep), self.lam)
             forms["v0"] = ufl.derivative(L0, p.v, dv)
+            forms["u0"] = ufl.derivative(L0, p.u, dv)  # grad E(u_0): u_0 a parameter
             for name, f in coefficients.items():
                 forms[f"theta0_{name}"] = ufl.derivative(L0, f, cell)
             forms["mass"] = ufl.replace(p.rho * ufl.inner(du, dv) * p.dx_mass, rep)
@@ -159,6 +175,11 @@ class BackwardSweep:
         self.owned = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
         #: Wall time (s) of the last sweep's Hessian assemblies and factorisations + solves.
         self.solve_s = {"assembly": 0.0, "solve": 0.0}
+        #: The last sweep's gradient per cell: parameter name -> dJ/dc on each owned DG0
+        #: dof (the parameter's value taken as cell-wise; zero off its cells), for the
+        #: parameters bound through the step's coefficients (materials, damping, an
+        #: obstacle's friction)
+        self.cell_gradient: dict[str, np.ndarray] = {}
 
     # -- helpers ------------------------------------------------------------------------
     def consistent(self, local: np.ndarray) -> np.ndarray:
@@ -230,8 +251,9 @@ class BackwardSweep:
             if direction is None:
                 continue
             mask = self.parameters.cell_mask(direction.group)
-            local = sum(factor * float(partial[c][mask].sum()) for c, factor in direction.terms)
-            out[name] = -self.problem.comm.allreduce(local, op=MPI.SUM)
+            cells = sum(factor * partial[c] for c, factor in direction.terms) * mask
+            self.cell_gradient[name] = self.cell_gradient.get(name, 0.0) - cells
+            out[name] = -self.problem.comm.allreduce(float(cells.sum()), op=MPI.SUM)
         return out
 
     # -- the sweep ----------------------------------------------------------------------
@@ -249,12 +271,15 @@ class BackwardSweep:
         """
         p, integ, h = self.problem, sim.integrator, tape.h
         self.solve_s = {"assembly": 0.0, "solve": 0.0}
+        self.cell_gradient = {}
         names = self.parameters.names
         grad = dict.fromkeys(names, 0.0)
         zero = np.zeros_like(tape.states[0].u)
         for n in range(tape.steps - 1, -1, -1):
             start, end = tape.states[n], tape.states[n + 1]
             bar = {k: state_bars[n + 1].get(k, zero) for k in STATE_FIELDS}
+            if self.handles and self.newmark:  # the handles' v and a: their rates at t
+                bar = self._handle_rates_bar(bar, end.time, grad)
             maps = linear_maps(integ, h, start)
             U = maps["U"]
             x_bar = sum(U[o, "x"] * bar[o] for o in STATE_FIELDS)
@@ -264,9 +289,16 @@ class BackwardSweep:
             self.stage(sim, tape, n)
             p.u.x.array[:] = end.u
             self.solve("hessian", x_bar)
+            if self.handles:  # x's pinned values u_D(t): x_bar - H lambda there
+                pinned_bar = x_bar - self.vector("hlam")
+                for name in self.handles:
+                    grad[name] += self.dot(pinned_bar,
+                                           self.parameters.handle_bases(name, end.time)[0])
             y_bar = y_bar - self.vector("y")
             for name, value in self.material_bar("theta").items():
                 grad[name] += value
+            if "contact.friction" in grad:  # IPC's mu: R_mu = w grad D / mu
+                grad["contact.friction"] -= self._ipc_mu_bar()
             d_bar = -self.vector("d") if p.damped else None
             target = state_bars[n]
             for k in maps["inputs"]:
@@ -278,13 +310,17 @@ class BackwardSweep:
                 target["u"] = target["u"] - self.vector("prev")
             if p.ipc is not None and p.ipc.friction is not None:
                 target["u"] = target["u"] + self._ipc_friction_bar()
-        v_bar = state_bars[0].get("v", zero)
+        bar0 = {"u": state_bars[0].get("u", zero), "v": state_bars[0].get("v", zero)}
         if self.newmark:
-            v_bar = v_bar + self._initial_acceleration(tape.states[0], state_bars[0], grad)
-        for name in names:
-            basis = self.parameters.velocity_basis(name, p)
-            if basis is not None:
-                grad[name] += self.dot(v_bar, basis)
+            u_part, v_part = self._initial_acceleration(tape.states[0], state_bars[0], grad)
+            bar0 = {"u": bar0["u"] + u_part, "v": bar0["v"] + v_part}
+        #: dJ/du_0 and dJ/dv_0 per dof (consistent local arrays; zero on pinned dofs)
+        self.initial_bar = {k: a.copy() for k, a in bar0.items()}
+        for a in self.initial_bar.values():
+            a[self.pinned] = 0.0
+        for name in names:  # u_0 and v_0's dependence on the parameters
+            for field, basis in self.parameters.initial_bases(name, p):
+                grad[name] += self.dot(bar0[field], basis)
         return np.array([grad[name] for name in names])
 
     def stage(self, sim, tape, n: int) -> None:
@@ -324,9 +360,34 @@ class BackwardSweep:
         local.reshape(-1, ipc.gdim)[: rows.shape[0]] = rows
         return self.consistent(local)
 
-    def _initial_acceleration(self, state: State, bar: dict, grad: dict) -> np.ndarray:
-        """Back through M a_0 = -grad E(0) - C v_0: adds theta's part to ``grad`` and
-        returns v_0's."""
+    def _handle_rates_bar(self, bar: dict, t: float, grad: dict) -> dict:
+        """Newmark puts the handles' exact rates at t into v and a at their nodes
+        (:meth:`fem_anim.problem.pins.Pins.prescribe_pin_rates`): adds the velocity
+        parameters' part and returns the adjoint with those entries cut from the update."""
+        for name in self.handles:
+            grad[name] += self.dot(bar["v"], self.parameters.handle_bases(name, t)[1])
+        bar = dict(bar)
+        for k in ("v", "a"):
+            bar[k] = bar[k].copy()
+            bar[k][self.handle_dofs] = 0.0
+        return bar
+
+    def _ipc_mu_bar(self) -> float:
+        """<dR/dmu, lambda> of IPC's friction coefficient at the step's solution
+        (collective): D = mu D_1 with the normal forces and tangent bases lagged at x_n,
+        so dR/dmu = w grad D / mu, grad D the difference of ipctk's gradients with and
+        without friction."""
+        ipc, w = self.problem.ipc, float(self.problem.weight.value)
+        x = ipc._update()
+        rows = ipc._gradient_rows(x, w, True) - ipc._gradient_rows(x, w, False)
+        local = np.zeros_like(self.lam.x.array)
+        local.reshape(-1, ipc.gdim)[: rows.shape[0]] = rows
+        return self.dot(local, self.lam.x.array) / float(ipc.cfg["friction"])
+
+    def _initial_acceleration(self, state: State, bar: dict,
+                              grad: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Back through M a_0 = -grad E(u_0) - C v_0: adds theta's part to ``grad`` and
+        returns u_0's and v_0's."""
         p = self.problem
         a_bar = bar.get("a", np.zeros_like(state.u)).copy()
         p.u.x.array[:] = state.u
@@ -335,4 +396,4 @@ class BackwardSweep:
         self.solve("mass", a_bar)
         for name, value in self.material_bar("theta0").items():
             grad[name] += value
-        return -self.vector("v0")
+        return -self.vector("u0"), -self.vector("v0")

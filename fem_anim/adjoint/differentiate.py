@@ -9,7 +9,8 @@ states (:mod:`fem_anim.adjoint.tape`), evaluates the objective
 (:mod:`fem_anim.adjoint.objectives`) and sweeps back for dJ/dtheta. :func:`gradient` is the
 one-call form at the scene's own values.
 
-What is differentiated: implicit Euler, BDF2 and Newmark; the displacement formulation with
+What is differentiated (the parameters: :mod:`fem_anim.adjoint.parameters`): implicit
+Euler, BDF2 and Newmark; the displacement formulation with
 materials whose energy is a UFL form of F (neo-Hookean, St. Venant-Kirchhoff, ...), per
 region and per body; gravity, Rayleigh damping, pins and moving handles; with implicit
 Euler and BDF2 also obstacles and IPC contact, barrier and lagged friction, exactly
@@ -172,6 +173,32 @@ class AdjointModel:
         self.timing["backward"] = time.perf_counter() - start
         return float(value), grad
 
+    def set_initial_fields(self, u: np.ndarray | None = None,
+                           v: np.ndarray | None = None) -> None:
+        """Per-node initial displacement ``u`` and velocity ``v`` added to the scene's (and
+        the parameters') u_0 and v_0 in the next runs (local dof arrays of V, ghosts
+        included, e.g. ``model.problem.u.x.array``-shaped; pinned entries are ignored;
+        None: none). Their gradient is :attr:`initial_gradient`."""
+        pinned = self.sweep.pinned
+        for key, field in (("u", u), ("v", v)):
+            if field is None:
+                self.parameters.nodal[key] = None
+                continue
+            field = np.array(field, dtype=float)
+            if field.shape != self.problem.u.x.array.shape:
+                raise FemAnimError(f"set_initial_fields: {key} has shape {field.shape}, the "
+                                   f"displacement's local dofs {self.problem.u.x.array.shape}")
+            field[pinned] = 0.0
+            self.parameters.nodal[key] = field
+
+    @property
+    def initial_gradient(self) -> dict[str, np.ndarray]:
+        """The last evaluation's dJ/du_0 and dJ/dv_0 per dof (``"u"``, ``"v"``: local dof
+        arrays of V, ghosts equal to their owners, zero on pinned dofs): the gradient with
+        respect to a per-node initial state (:meth:`set_initial_fields`). Sum products
+        over the owned entries only (``model.sweep.dot``)."""
+        return self.sweep.initial_bar
+
     def bind(self, objective) -> None:
         """Prepare an objective for this model, once (collective; raises its bad input,
         e.g. a target run on another mesh)."""
@@ -181,7 +208,7 @@ class AdjointModel:
 
 
 def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORLD,
-             cli_options: dict[str, str] | None = None) -> tuple[float, dict[str, float]]:
+             cli_options: dict[str, str] | None = None, per_cell: bool = False) -> tuple:
     """J and dJ/dtheta at the scene's own parameter values (collective).
 
     Args:
@@ -191,9 +218,12 @@ def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORL
         params: Scene keys, e.g. ``["material.youngs_modulus", "initial.velocity"]``.
         comm: MPI communicator.
         cli_options: PETSc options for the forward solver.
+        per_cell: Also return the gradient per cell (:mod:`fem_anim.adjoint.cell_gradient`).
 
     Returns:
-        J, and {parameter name: dJ/dparameter}.
+        J, and {parameter name: dJ/dparameter}; with ``per_cell`` also {parameter name:
+        DG0 Function of dJ/dtheta_c} for the parameters with one (materials, damping, an
+        obstacle's friction).
 
     Raises:
         FemAnimError: a parameter the scene does not have or a feature not covered.
@@ -201,4 +231,9 @@ def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORL
     """
     model = AdjointModel(scene, params, comm, cli_options)
     value, grad = model.evaluate(model.parameters.values(), objective)
-    return value, dict(zip(model.names, map(float, grad)))
+    grads = dict(zip(model.names, map(float, grad)))
+    if per_cell:
+        from fem_anim.adjoint.cell_gradient import cell_functions
+
+        return value, grads, cell_functions(model)
+    return value, grads

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fem_anim.adjoint.cell_gradient import owned_cell_values
+
 __all__ = ["DEFAULT_BOUNDS", "FitResult", "default_bounds", "fit"]
 
 #: Bounds relative to the start (factor range) or absolute, per parameter kind.
@@ -25,13 +27,15 @@ DEFAULT_BOUNDS = {"material.youngs_modulus": ("factor", 1e-3, 1e3),
                   "material.density": ("factor", 1e-3, 1e3),
                   "material.poisson_ratio": ("absolute", -0.99, 0.499),
                   "damping.alpha": ("absolute", 0.0, None),
-                  "damping.beta": ("absolute", 0.0, None)}
+                  "damping.beta": ("absolute", 0.0, None),
+                  "friction": ("factor", 1e-3, 1e3)}
 
 
 def default_bounds(name: str, start: float) -> tuple[float | None, float | None]:
     """The bounds of a parameter without ``--bounds``: E and rho within a factor 1000 of
     the start, nu in (-0.99, 0.499) (a region's or body's too), damping coefficients
-    non-negative, velocities unbounded."""
+    non-negative, friction coefficients within a factor 1000 of the start, initial
+    velocities, spins and displacements unbounded."""
     kind = next((v for k, v in DEFAULT_BOUNDS.items() if name == k or
                  name.endswith("." + k)), None)
     if kind is None:
@@ -62,6 +66,8 @@ class FitResult:
     evaluations: int
     message: str
     history: list[dict] = field(default_factory=list)
+    #: The gradient per cell there (:func:`~fem_anim.adjoint.cell_gradient.owned_cell_values`)
+    cell_gradient: dict = field(default_factory=dict)
 
 
 def fit(model, objective, bounds: list[tuple[float | None, float | None]] | None = None,
@@ -104,7 +110,8 @@ def fit(model, objective, bounds: list[tuple[float | None, float | None]] | None
                  "gradient_norm": float(np.linalg.norm(grad)), "accepted": False}
         history.append(entry)
         if not best or value < best["value"]:
-            best.update(theta=theta.copy(), value=value, gradient=grad.copy())
+            best.update(theta=theta.copy(), value=value, gradient=grad.copy(),
+                        cells=owned_cell_values(model))
         if report is not None:
             report(entry)
         return value / reference[0], grad * scale / reference[0]
@@ -121,5 +128,6 @@ def fit(model, objective, bounds: list[tuple[float | None, float | None]] | None
                                "gtol": tolerance})
     model.parameters.assign(best["theta"])
     return FitResult(theta=best["theta"], value=best["value"], gradient=best["gradient"],
+                     cell_gradient=best["cells"],
                      iterations=int(result.nit), evaluations=len(history),
                      message=str(result.message), history=history)

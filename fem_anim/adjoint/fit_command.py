@@ -8,7 +8,9 @@ The objective is :class:`~fem_anim.adjoint.objectives.TrajectoryMatch` of the ta
 (:mod:`fem_anim.adjoint.fit`) with the adjoint gradient. Every evaluation is printed and
 written as a row of ``fit.csv`` (parameters, objective, gradient norm, whether L-BFGS-B
 accepted it as an iterate); ``fit.json`` holds the final parameters under their scene keys
-(e.g. ``"material.youngs_modulus"``), J, |dJ/dtheta|, and the iteration counts. The output
+(e.g. ``"material.youngs_modulus"``), J, |dJ/dtheta|, and the iteration counts;
+``cell_gradient.vtu`` the gradient per cell there of the parameters that have one
+(:mod:`fem_anim.adjoint.cell_gradient`; ParaView reads it). The output
 directory is claimed like a run directory (:func:`fem_anim.output.rundir.claim`): a folder
 fem_anim did not make is never written into. A parameter the scene does not have, a target
 on another mesh or a forward step that does not converge is one error line (exit code 2).
@@ -23,7 +25,10 @@ from pathlib import Path
 from fem_anim.console import OneLineParser, quiet_jit_logging
 from fem_anim.errors import FemAnimError, describe_os_error
 
-__all__ = ["build_fit_parser", "fit_command", "parse_bounds"]
+__all__ = ["CELL_GRADIENT", "build_fit_parser", "fit_command", "parse_bounds"]
+
+#: The gradient per cell at the best parameters (:mod:`fem_anim.adjoint.cell_gradient`)
+CELL_GRADIENT = "cell_gradient.vtu"
 
 
 def build_fit_parser() -> OneLineParser:
@@ -37,12 +42,14 @@ def build_fit_parser() -> OneLineParser:
     parser.add_argument("--param", action="append", required=True, metavar="KEY",
                         help="a scene key to fit (material.youngs_modulus, "
                         "material.poisson_ratio, material.density, damping.alpha, "
-                        "damping.beta, initial.velocity; a body's or region's: "
+                        "damping.beta, initial.velocity, initial.angular_velocity, "
+                        "initial.displacement, pin.NAME.velocity, obstacle.NAME.friction, "
+                        "contact.friction; a body's or region's: "
                         "body.NAME.material.youngs_modulus, region.NAME.material.density, "
-                        "body.NAME.initial.velocity, ...)")
+                        "body.NAME.initial.velocity, ...; docs/gradients.md lists them)")
     parser.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW,HIGH",
-                        help="bounds of a parameter (default: E and rho within x1000 of the "
-                        "start, nu in (-0.99, 0.499))")
+                        help="bounds of a parameter (default: E, rho and friction within "
+                        "x1000 of the start, nu in (-0.99, 0.499))")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="override a scene key (value parsed as TOML)")
     parser.add_argument("--max-iterations", type=int, default=30,
@@ -139,6 +146,10 @@ def fit_command(argv: list[str], cli_options: dict[str, str]) -> int:
 
     try:
         result = fit(model, objective, bounds, args.max_iterations, report=report)
+        if result.cell_gradient:  # at the best parameters (collective: gathered to rank 0)
+            from fem_anim.adjoint.cell_gradient import write_cell_gradient
+
+            write_cell_gradient(out / CELL_GRADIENT, model, result.cell_gradient)
         error = None
         if comm.rank == 0:
             try:
@@ -166,7 +177,8 @@ def _write_results(out: Path, rows: list[str], result, model, args) -> None:
                "message": result.message, "target": str(args.target)}
     write_atomically(out / "fit.csv", ("\n".join(lines) + "\n").encode())
     write_atomically(out / "fit.json", (json.dumps(summary, indent=2) + "\n").encode())
-    write_manifest(out, read_manifest(out) | {"fit.csv", "fit.json"})
+    written = {"fit.csv", "fit.json"} | ({CELL_GRADIENT} if result.cell_gradient else set())
+    write_manifest(out, read_manifest(out) | written)
     if not args.quiet:
         print(f"fit: {result.message} after {result.iterations} iterations; "
               f"results in {out}/fit.json")

@@ -58,7 +58,8 @@ class Tape:
 
 
 def start_state(sim, parameters) -> State:
-    """The state at t = 0 with the parameters' initial velocity (collective).
+    """The state at t = 0 with the parameters' initial velocity and displacement
+    (collective).
 
     v_0 is the scene's rigid field with its translational part replaced by the parameters'
     ``initial.velocity`` and each body's (v_0 is affine in them); Newmark's
@@ -70,7 +71,7 @@ def start_state(sim, parameters) -> State:
     v0 = np.zeros(n) if v0 is None else v0
     v0 = v0 + parameters.velocity_offset(p)
     p.v.x.array[:] = v0
-    state = State(u=np.zeros(n), v=v0, a=np.zeros(n))
+    state = State(u=parameters.displacement_offset(p), v=v0, a=np.zeros(n))
     if sim.integrator.name == "newmark":
         state.a = sim.acceleration(state.u, state.v)
     return state

@@ -124,6 +124,9 @@ class ObstacleContact:
                                             "radius": float(ob["radius"]) + offset}))
         self._setup_points(points)
         self._check_rest()
+        #: obstacle index -> its friction coefficient mu (a Constant: the adjoint's parameter
+        #: ``obstacle.NAME.friction``), for the obstacles with friction > 0
+        self.friction_coefficients: dict[int, fem.Constant] = {}
         self.energy = self._sum(lambda ob, d: contact_forms.contact_energy(
             d(X + u), ob["dhat"], ob["stiffness"], self.ds))
         self.friction = self._sum(lambda ob, d: self._friction(ob, d, u, u_prev), friction=True)
@@ -152,7 +155,10 @@ class ObstacleContact:
         else:
             normal = contact_forms.sphere_normal(
                 x_n, ufl.as_vector(self._geometry(ob)["center"].tolist()))
-        return contact_forms.friction_potential(u, u_prev, normal, pressure, ob["friction"],
+        index = next(i for i, (o, _) in enumerate(self._distance) if o is ob)
+        mu = self.friction_coefficients[index] = fem.Constant(
+            self.u.function_space.mesh, PETSc.ScalarType(ob["friction"]))
+        return contact_forms.friction_potential(u, u_prev, normal, pressure, mu,
                                                 ob["epsv"] * self.step_size, self.ds)
 
     def curvature_correction(self, du, dv):
