@@ -106,7 +106,7 @@ class AdjointModel:
 
     Args:
         scene: A validated :class:`~fem_anim.scene.schema.Scene`.
-        params: Scene keys of the parameters (:func:`~fem_anim.adjoint.parameters.expand_keys`).
+        params: Scene keys of the parameters (:func:`~fem_anim.adjoint.parameter_keys.expand_keys`).
         comm: MPI communicator.
         cli_options: PETSc options above :data:`ADJOINT_OPTIONS`.
         steps: Number of steps (default ``time.steps``); the step is ``time.dt``.

@@ -1,36 +1,5 @@
-"""What can be differentiated, and how it is bound into the step objective (seed eq. 4).
-
-A parameter is a scalar named by its scene key:
-
-* ``material.youngs_modulus`` (E, Pa), ``material.poisson_ratio`` (nu),
-  ``material.density`` (rho, kg/m^3): the scene's ``[material]`` (with ``[[region]]``
-  entries: on the cells no region claims);
-* ``region.NAME.material.KEY``: the same constants of the ``[[region]]`` named NAME;
-* ``body.NAME.material.KEY``: those of the ``[[body]]`` named NAME (and
-  ``body.NAME.region.R.material.KEY`` of its ``[[body.region]]`` R);
-* ``damping.alpha`` (1/s) and ``damping.beta`` (s): the Rayleigh coefficients of
-  ``[damping]``, C = alpha M + beta K_0 (seed eq. 4's dissipation term);
-* the components of ``initial.velocity`` (``initial.velocity[0]``, ... in m/s: the rigid
-  initial velocity; the key ``initial.velocity`` names all d components), and of a body's
-  ``body.NAME.initial.velocity``;
-* the initial spin ``initial.angular_velocity`` (rad/s; 3 components ``[0]``, ``[1]``,
-  ``[2]`` in 3D, one number about z in 2D) and a body's ``body.NAME.initial.angular_velocity``:
-  the rotation about ``initial.center``, by default the body's centre of mass c, as in
-  :mod:`fem_anim.simulation.initial_state` (v_0 = v + omega x (X - c));
-* the initial displacement ``initial.displacement`` (m; d components) and a body's
-  ``body.NAME.initial.displacement``: a rigid translation u_0 of the body's unpinned nodes
-  at t = 0. It is not a scene key (scenes start at the rest shape): its value at the scene
-  is 0, and the forward run of the adjoint starts from u_0.
-
-* a handle's velocity ``pin.NAME.velocity`` (m/s; d components) of a ``[[pin]]`` that
-  moves in the scene (``velocity`` or ``angular_velocity`` given; a body's pin:
-  ``body.B.pin.NAME.velocity``): its prescribed displacement at t is the rotation part plus
-  velocity min(t, until), so d u_D(t)/d velocity_i = min(t, until) e_i on the pin's nodes
-  (and, with Newmark, whose pinned v and a are the handle's exact rates, dv/d velocity_i
-  = e_i while it moves);
-* the friction coefficients: ``obstacle.NAME.friction`` (mu of the ``[[obstacle]]`` named
-  NAME) and ``contact.friction`` (IPC's mu), each positive in the scene (with mu = 0 the
-  step has no friction term).
+"""How the parameters (:mod:`fem_anim.adjoint.parameter_keys`: what can be differentiated)
+are bound into the step objective (seed eq. 4).
 
 The material constants enter g of seed eq. 4 through the Lamé parameters mu(E, nu),
 lambda(E, nu) and rho, per cell. Without regions or bodies the forward solver reads them as
@@ -80,150 +49,18 @@ from dataclasses import dataclass
 import numpy as np
 import ufl
 from dolfinx import fem
-from dolfinx.fem import petsc as fem_petsc
-from petsc4py import PETSc
 
 from fem_anim import compat
+from fem_anim.adjoint.parameter_keys import (
+    DAMPING_KEYS, DISPLACEMENT_KEY, IPC_FRICTION_KEY, MATERIAL_KEYS, SPIN_KEY,
+    VELOCITY_KEY, component, components, expand_keys, handle_prefix, is_obstacle_friction,
+    split_group)
 from fem_anim.errors import FemAnimError
 from fem_anim.forms.gravity import gravity_potential
 from fem_anim.forms.lame import lame_parameters
 from fem_anim.simulation.initial_state import center_of_mass, rigid_velocity
 
-__all__ = ["DAMPING_KEYS", "DISPLACEMENT_KEY", "INITIAL_KEYS", "IPC_FRICTION_KEY",
-           "MATERIAL_KEYS", "SPIN_KEY",
-           "VELOCITY_KEY", "ParameterSet", "expand_keys", "refresh_constant_terms"]
-
-#: Material parameters: key -> the key inside ``[material]`` (after a group's prefix).
-MATERIAL_KEYS = {"material.youngs_modulus": "youngs_modulus",
-                 "material.poisson_ratio": "poisson_ratio",
-                 "material.density": "density"}
-#: The Rayleigh damping coefficients: scene key -> the key inside ``[damping]``.
-DAMPING_KEYS = {"damping.alpha": "alpha", "damping.beta": "beta"}
-#: The rigid initial velocity (one parameter per component).
-VELOCITY_KEY = "initial.velocity"
-#: The initial spin about the centre (one parameter per component; one number in 2D).
-SPIN_KEY = "initial.angular_velocity"
-#: The initial rigid translation (one parameter per component; not a scene key).
-DISPLACEMENT_KEY = "initial.displacement"
-#: The initial-state parameters (vectors of a body or of the scene).
-INITIAL_KEYS = (VELOCITY_KEY, SPIN_KEY, DISPLACEMENT_KEY)
-#: IPC's friction coefficient (an obstacle's: ``obstacle.NAME.friction``).
-IPC_FRICTION_KEY = "contact.friction"
-
-
-def _handle_prefix(key: str) -> str | None:
-    """``pin.NAME.`` or ``body.B.pin.NAME.`` of a handle-velocity key (with or without a
-    component), else None."""
-    base = _component(key)[0]
-    if not base.endswith(".velocity"):
-        return None
-    head = base[: -len("velocity")]
-    if head.startswith("pin.") and len(head) > len("pin.."):
-        return head
-    if head.startswith("body.") and ".pin." in head and not head.endswith(".pin."):
-        return head
-    return None
-
-
-def _is_obstacle_friction(key: str) -> bool:
-    return key.startswith("obstacle.") and key.endswith(".friction") and \
-        len(key) > len("obstacle..friction")
-
-
-def components(base: str, d: int) -> int:
-    """How many scalars an initial-state key has: d, and for the spin 1 in 2D, 3 in 3D."""
-    if base == SPIN_KEY:
-        return 1 if d == 2 else 3
-    return d
-
-
-def _component(rest: str) -> tuple[str, int | None]:
-    """``initial.velocity[1]`` -> (``initial.velocity``, 1); no index: (rest, None);
-    a malformed index: (rest, -1)."""
-    if rest.endswith("]") and "[" in rest:
-        base, _, index = rest[:-1].partition("[")
-        return base, int(index) if index.isdigit() else -1
-    return rest, None
-
-
-def _split_group(key: str) -> tuple[str, str]:
-    """(group prefix, rest) of a key: ``body.left.material.density`` ->
-    (``body.left.``, ``material.density``); ``material.density`` -> ("", itself)."""
-    if key.startswith(("body.", "region.")):
-        for tail in (".material.", ".initial."):
-            at = key.find(tail)
-            if at > 0:
-                return key[: at + 1], key[at + 1:]
-    return "", key
-
-
-def _valid_index(index: int | None, n: int) -> bool:
-    """A component index of a vector of n scalars (None: the whole vector; a 1-vector, the
-    2D spin, has no index)."""
-    return index is None or (n > 1 and 0 <= index < n)
-
-
-def _scalars(key: str, index: int | None, n: int) -> list[str]:
-    """The scalar names of a vector key: itself (a component or a 1-vector) or KEY[i]."""
-    return [key] if index is not None or n == 1 else [f"{key}[{i}]" for i in range(n)]
-
-
-def expand_keys(keys: list[str], d: int) -> list[str]:
-    """Scalar parameter names from scene keys (``...initial.velocity`` -> its d components).
-
-    Raises:
-        FemAnimError: a key that names no differentiable parameter (whether the scene has
-            the named body or region is checked by :class:`ParameterSet`).
-    """
-    names: list[str] = []
-    for key in keys:
-        prefix, rest = _split_group(key)
-        if rest in MATERIAL_KEYS or (not prefix and rest in DAMPING_KEYS) or \
-                key == IPC_FRICTION_KEY or _is_obstacle_friction(key):
-            names.append(key)
-        elif _handle_prefix(key) is not None and _valid_index(_component(key)[1], d):
-            names.extend(_scalars(key, _component(key)[1], d))
-        elif _component(rest)[0] in INITIAL_KEYS and not prefix.startswith("region.") and \
-                _valid_index(_component(rest)[1], components(_component(rest)[0], d)):
-            base, index = _component(rest)
-            names.extend(_scalars(key, index, components(base, d)))
-        else:
-            known = ", ".join([*MATERIAL_KEYS, *DAMPING_KEYS, *INITIAL_KEYS,
-                               "body.NAME.material.KEY", "region.NAME.material.KEY",
-                               "body.NAME.initial.velocity", "body.NAME.initial.angular_velocity",
-                               "body.NAME.initial.displacement", "pin.NAME.velocity",
-                               "body.NAME.pin.P.velocity", "obstacle.NAME.friction",
-                               IPC_FRICTION_KEY])
-            raise FemAnimError(f"--param {key}: not a parameter this scene can differentiate "
-                               f"(one of {known})")
-    if len(set(names)) != len(names):
-        raise FemAnimError(f"--param: a parameter is named twice in {', '.join(keys)}")
-    return names
-
-
-def refresh_constant_terms(problem, gravity_gradient: fem.Form | None) -> None:
-    """Reassemble the step objective's terms kept assembled (the mass and damping matrices,
-    gravity's nodal force: :mod:`fem_anim.problem.constant_terms`) after rho, mu, lambda
-    or the damping coefficients changed (collective).
-
-    Args:
-        problem: The :class:`~fem_anim.problem.objective.EnergyProblem`.
-        gravity_gradient: The compiled gradient of the gravity potential (None: no gravity).
-    """
-    terms = problem.constant_terms
-    if terms is None:
-        return
-    for term, Q in zip(terms.terms, terms.matrices):
-        Q.zeroEntries()
-        fem_petsc.assemble_matrix(Q, term.hessian_form)
-        Q.assemble()
-    terms._hessians.clear()  # the summed Hessian: reassembled at its next use
-    if gravity_gradient is not None:
-        with terms.gradient.localForm() as loc:
-            loc.set(0.0)
-        fem_petsc.assemble_vector(terms.gradient, gravity_gradient)
-        terms.gradient.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-
+__all__ = ["MaterialDirection", "ParameterSet"]
 
 @dataclass
 class MaterialDirection:
@@ -240,7 +77,7 @@ class ParameterSet:
     Args:
         problem: The :class:`~fem_anim.problem.objective.EnergyProblem`.
         scene: Its scene.
-        keys: Scene keys (:func:`expand_keys`).
+        keys: Scene keys (:func:`~fem_anim.adjoint.parameter_keys.expand_keys`).
 
     Raises:
         FemAnimError: a key the scene does not have (a body or region it lacks,
@@ -278,9 +115,9 @@ class ParameterSet:
         self._scene_handle: dict[str, np.ndarray] = {}
         self.friction: dict[int | str, float] = {}
         for name in self.names:
-            prefix, rest = _split_group(name)
-            if _handle_prefix(name) is not None:
-                self._bind_handle(name, _handle_prefix(name), scene)
+            prefix, rest = split_group(name)
+            if handle_prefix(name) is not None:
+                self._bind_handle(name, handle_prefix(name), scene)
             elif rest in MATERIAL_KEYS:
                 if prefix not in self._groups:
                     kind, _, group = prefix[:-1].partition(".")
@@ -290,10 +127,10 @@ class ParameterSet:
             elif rest in DAMPING_KEYS:
                 if not problem.damped:
                     raise FemAnimError(f"--param {name}: the scene has no [damping] section")
-            elif name == IPC_FRICTION_KEY or _is_obstacle_friction(name):
+            elif name == IPC_FRICTION_KEY or is_obstacle_friction(name):
                 self._bind_friction(name, scene)
             else:
-                self._bind_initial(name, prefix, _component(rest)[0], bodies)
+                self._bind_initial(name, prefix, component(rest)[0], bodies)
         self.damping = {k: float(getattr(problem, f"damping_{k}").value)
                         for k in ("alpha", "beta")} if problem.damped else {}
         self.one = fem.Function(problem.W0, name="one")
@@ -432,7 +269,7 @@ class ParameterSet:
     # -- values -------------------------------------------------------------------------
     def _slot(self, name: str):
         """(kind, group or prefix, index) of a parameter."""
-        prefix, rest = _split_group(name)
+        prefix, rest = split_group(name)
         if rest in MATERIAL_KEYS:
             return "material", self._groups[prefix], \
                 ("youngs_modulus", "poisson_ratio", "density").index(MATERIAL_KEYS[rest])
@@ -440,9 +277,9 @@ class ParameterSet:
             return "damping", None, DAMPING_KEYS[rest]
         if name in self._friction_slot:
             return "friction", self._friction_slot[name], 0
-        if _handle_prefix(name) is not None:
-            return "handle", _handle_prefix(name), _component(name)[1]
-        base, index = _component(rest)
+        if handle_prefix(name) is not None:
+            return "handle", handle_prefix(name), component(name)[1]
+        base, index = component(rest)
         return "initial", (prefix, base), 0 if index is None else index
 
     def values(self) -> np.ndarray:
@@ -488,7 +325,8 @@ class ParameterSet:
 
     def _sync(self) -> None:
         """Constants (or the problem's DG0 Functions) and their stand-ins from the table,
-        and the problem's terms assembled once from them (:func:`refresh_constant_terms`)."""
+        and the problem's terms assembled once from them
+        (:meth:`~fem_anim.problem.constant_terms.ConstantTerms.reassemble`)."""
         mu, lmbda = lame_parameters(self.table[:, 0], self.table[:, 1])
         values = {"mu": np.atleast_1d(mu), "lmbda": np.atleast_1d(lmbda),
                   "rho": self.table[:, 2]}
@@ -510,7 +348,8 @@ class ParameterSet:
                 changed |= float(constant.value) != table[0]
                 constant.value = table[0]
         if changed:
-            refresh_constant_terms(self.problem, self._gravity_gradient)
+            if self.problem.constant_terms is not None:
+                self.problem.constant_terms.reassemble(self._gravity_gradient)
 
     def scene_values(self) -> dict:
         """The parameters under their scene keys (an initial-state vector as a list; the 2D
@@ -647,7 +486,7 @@ class ParameterSet:
     @property
     def handle_names(self) -> list[str]:
         """The handle-velocity parameters."""
-        return [n for n in self.names if _handle_prefix(n) is not None]
+        return [n for n in self.names if handle_prefix(n) is not None]
 
     def handle_dofs(self) -> np.ndarray:
         """The local dofs (all components) of the handles' nodes (all moving pins)."""

@@ -113,6 +113,26 @@ class ConstantTerms:
         if self.gradient is not None:
             b.axpy(float(self.linear_scale.value), self.gradient)
 
+    def reassemble(self, gradient_form: fem.Form | None = None) -> None:
+        """Assemble the terms again after coefficients inside them changed (rho, mu, lambda,
+        the damping coefficients: the adjoint's parameters, :mod:`fem_anim.adjoint.parameters`;
+        collective).
+
+        Args:
+            gradient_form: The linear term's gradient to assemble in place of the one kept
+                (gravity's nodal force with the new densities); None: keep it.
+        """
+        for term, Q in zip(self.terms, self.matrices):
+            Q.zeroEntries()
+            fem_petsc.assemble_matrix(Q, term.hessian_form)
+            Q.assemble()
+        self._hessians.clear()  # the summed Hessian: reassembled at its next use
+        if gradient_form is not None:
+            with self.gradient.localForm() as loc:
+                loc.set(0.0)
+            fem_petsc.assemble_vector(self.gradient, gradient_form)
+            self.gradient.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+
     def add_hessian(self, A: PETSc.Mat, subset: bool = False) -> None:
         """A += sum s Q with the pinned rows and columns of Q zeroed (A assembled; collective).
 
