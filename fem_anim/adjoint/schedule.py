@@ -38,15 +38,22 @@ def binomial_table(length: int, slots: int) -> tuple[np.ndarray, np.ndarray]:
     ls = np.arange(length + 1, dtype=np.int64)
     cost = np.zeros((slots + 1, length + 1), dtype=np.int64)
     split = np.zeros((slots + 1, length + 1), dtype=np.int64)
-    cost[0] = ls * (ls - 1) // 2
-    cost[0, 0] = 0
-    for s in range(1, slots + 1):
-        for l in range(2, length + 1):
-            j = np.arange(1, l)
-            total = j + cost[s - 1, l - j] + cost[s, j]
-            best = int(np.argmin(total))  # the first minimiser: the shortest advance
-            cost[s, l] = total[best]
-            split[s, l] = j[best]
+    cost[0] = np.maximum(ls * (ls - 1) // 2, 0)
+    # with s >= l - 1 slots every state is stored on the way: T(l, s) = l - 1, j = 1
+    enough = ls[None, :] <= np.arange(slots + 1)[:, None] + 1
+    cost[1:] = np.where(enough[1:], np.maximum(ls - 1, 0), 0)
+    split[1:] = np.where(enough[1:] & (ls >= 2), 1, 0)
+    if slots >= length - 1:  # the recursion then only meets l <= s + 1
+        return cost, split
+    for l in range(3, length + 1):  # column by column: T(., l) needs columns < l only
+        s = np.arange(1, min(slots, l - 2) + 1)  # the rows without enough slots
+        if s.size == 0:
+            continue
+        j = np.arange(1, l)
+        total = j[None, :] + cost[s - 1][:, l - j] + cost[s][:, j]
+        best = np.argmin(total, axis=1)  # the first minimiser: the shortest advance
+        cost[s, l] = total[np.arange(s.size), best]
+        split[s, l] = j[best]
     return cost, split
 
 
