@@ -20,7 +20,9 @@ A recomputed step repeats the recorded step's arithmetic exactly: it starts from
 state (BDF2's u_{n-1}, v_{n-1} and Newmark's a are in it) with what the simulation carries
 across steps besides restored as it was there: IPC's adaptive barrier stiffness schedule
 (kappa, its floor, whether it was balanced, the last pairs' distance and kappa's bound),
-the Hessian shift, the velocity the problem holds. Each recorded state's bytes are
+the Hessian shift, the velocity the problem holds, and the Hessian's sparsity pattern
+that IPC's pairs grew (:func:`fresh_hessian`: the direct solvers' rounding depends on it;
+each recording run starts from the cells' pattern). Each recorded state's bytes are
 fingerprinted; a recomputed state whose fingerprint differs is counted in
 :attr:`Tape.replay_mismatches` (the tests assert none; a recomputed IPC kappa that differs
 from the recorded one raises). The states an objective reads (its
@@ -183,10 +185,10 @@ class Tape:
         if self.storage == "memory" or keep:
             self._stored[n] = state
             if self.storage == "revolve":
-                self._carry[n] = _carry(sim)
+                self._carry[n] = _carry(sim, n == 0)
         elif self.storage == "disk":
             self._write(n, state)
-        if observed and n not in self._stored and self.storage != "disk":
+        if observed and self.storage == "revolve":  # a checkpoint is dropped in the sweep
             self._observed[n] = State(u=state.u.copy(), v=state.v.copy(), a=None,
                                       time=state.time, step=state.step)
         self._account()
@@ -199,12 +201,14 @@ class Tape:
             self.peak_nbytes = sum(state_bytes(s) for s in self._stored.values())
 
     def _write(self, n: int, state: State) -> None:
-        if self._folder is None:
-            self._folder = Path(tempfile.mkdtemp(prefix="fem_anim_tape_"))
-            self._finalizer = weakref.finalize(self, shutil.rmtree, str(self._folder), True)
-        arrays = {k: getattr(state, k) for k in FIELDS if getattr(state, k) is not None}
-        path = self._folder / f"state_{n:07d}.npz"
+        path = Path(tempfile.gettempdir())
         try:
+            if self._folder is None:  # this rank's own folder
+                self._folder = Path(tempfile.mkdtemp(prefix="fem_anim_tape_"))
+                self._finalizer = weakref.finalize(self, shutil.rmtree, str(self._folder),
+                                                   True)
+            arrays = {k: getattr(state, k) for k in FIELDS if getattr(state, k) is not None}
+            path = self._folder / f"state_{n:07d}.npz"
             np.savez(path, time=np.array(state.time), step=np.array(state.step), **arrays)
         except OSError as err:
             self.close()
@@ -309,9 +313,46 @@ class _StateView:
         return (self.tape.state(n) for n in range(len(self)))
 
 
-def _carry(sim) -> dict:
-    """What the simulation carries from one step to the next besides the state."""
+def _grows(sim) -> bool:
+    """Whether the step Hessian's pattern grows with contact (AIJ with IPC contact)."""
+    p = sim.problem
+    return p.ipc is not None and not p.mixed and "baij" not in sim.minimiser.A.getType()
+
+
+def fresh_hessian(sim, couplings=None) -> None:
+    """Give the forward's Newton a new Hessian with the cells' pattern plus ``couplings``
+    (:func:`~fem_anim.simulation.hessian_pattern.extra_couplings`' of a checkpoint; rank 0's;
+    None: the cells' only), as the run had it there (collective).
+
+    The direct solvers' ordering and pivoting depend on the pattern, which IPC's pairs grow
+    (:mod:`fem_anim.simulation.hessian_pattern`): a recomputed step rounds as the recorded
+    one only with the recorded pattern, and a recording run is the same function of the
+    parameters each time only if it starts from the cells' pattern.
+    """
+    from fem_anim.simulation.checkpoint import dof_identity
+    from fem_anim.simulation.hessian_pattern import restore_couplings
+
+    m, p = sim.minimiser, sim.problem
+    A = p.create_matrix("baij" if "baij" in m.A.getType() else None)
+    if couplings is not None:
+        restore_couplings(A, p.V, dof_identity(p.V, sim.domain), couplings)
+    m.A.destroy()
+    m.A = A
+    m.snes.setJacobian(m.reuse.jacobian, A)
+    if m.hessian.mode == "auto":
+        m.hessian.enable_inertia(A)
+
+
+def _carry(sim, start: bool = False) -> dict:
+    """What the simulation carries from one step to the next besides the state (at s_0
+    with ``start``: the cells' Hessian pattern)."""
     out = {}
+    if _grows(sim):
+        from fem_anim.simulation.checkpoint import dof_identity
+        from fem_anim.simulation.hessian_pattern import extra_couplings
+
+        out["couplings"] = None if start else extra_couplings(
+            sim.minimiser.A, sim.problem.V, dof_identity(sim.problem.V, sim.domain))
     ipc = sim.problem.ipc
     if ipc is not None:
         out["ipc"] = {k: getattr(ipc, k) for k in
@@ -330,6 +371,8 @@ def _restore(sim, carry: dict, state: State) -> None:
         setattr(ipc, k, value)
     if "shift" in carry:
         sim.minimiser.shift.c = carry["shift"]
+    if "couplings" in carry:
+        fresh_hessian(sim, carry["couplings"])
     sim.problem.v.x.array[:] = state.v
 
 
@@ -385,6 +428,8 @@ def record_forward(sim, parameters, steps: int, h: float, storage: str = "memory
         ipc.restore({"kappa_floor": 0.0, "kappa_balanced": 0.0})
         ipc.kappa = float(ipc.cfg["stiffness"]) if ipc.cfg["stiffness"] != "adaptive" else 0.0
         ipc._distance = np.inf
+    if _grows(sim):  # and its Hessian from the cells' pattern
+        fresh_hessian(sim)
     state = start_state(sim, parameters)
     tape._keep(0, state, sim, True, 0 in seen)
     for n in range(steps):
