@@ -13,6 +13,7 @@ recomputation, or on disk, the gradient is the same.
 * ``mpirun -n 2`` (this file run as a script): J bit for bit, the states handed to the
   sweep and the gradient to 1e-12 (a step re-run on 2 ranks from the same state sometimes
   rounds differently), each rank with its own files;
+* ``fem-anim fit --storage revolve --checkpoints 2`` writes what ``--storage memory`` does;
 * the choice of storage, an objective that does not list its steps, a state revolve did
   not keep, the files removed on close, and bad options (one clear error).
 """
@@ -28,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import ROOT, clean_environment, mpirun_command
-from test_adjoint import PARAMS, objective, scene_dict
+from test_adjoint import PARAMS, fem_anim_cli, fit_setup, objective, scene_dict  # noqa: F401
 from test_adjoint_contact import BODY, cubes_objective, cubes_scene, plane_objective, plane_scene
 
 import fem_anim
@@ -216,6 +217,25 @@ def test_disk_storage_refuses_an_unwritable_folder(tmp_path, monkeypatch):
     monkeypatch.setattr("tempfile.tempdir", str(blocked))
     with pytest.raises(FemAnimError, match="cannot .*forward states"):
         evaluate(scene_dict("bdf2", steps=5), PARAMS, objective, "disk")
+
+
+def test_fit_command_takes_the_storage(fit_setup):
+    """Two L-BFGS-B iterations with the states recomputed by revolve write the evaluations
+    (parameters, J, gradient norm) of the states kept in memory, digit for digit."""
+    root, written = fit_setup, {}
+    for storage in (["--storage", "memory"], ["--storage", "revolve", "--checkpoints", "2"]):
+        out = f"fit-{storage[1]}"
+        r = fem_anim_cli(["fit", "scene.toml", "--target", "ref", "--param",
+                          "material.youngs_modulus", "--max-iterations", "2", *storage,
+                          "-o", out, "-q"], root)
+        assert r.returncode == 0, r.stderr
+        written[storage[1]] = (root / out / "fit.csv").read_text()
+    assert written["revolve"] == written["memory"]
+    r = fem_anim_cli(["fit", "scene.toml", "--target", "ref", "--param",
+                      "material.youngs_modulus", "--storage", "revolve", "--checkpoints", "0",
+                      "-o", "bad-checkpoints", "-q"], root)
+    assert r.returncode == 2
+    assert r.stderr.strip() == "fem-anim: error: gradient: checkpoints must be >= 1, got 0"
 
 
 # -- two ranks ----------------------------------------------------------------------------------
