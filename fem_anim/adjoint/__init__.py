@@ -2,9 +2,11 @@
 
 :mod:`~fem_anim.adjoint.parameters` binds what can be differentiated (material constants,
 density, the initial velocity) into the step objective; :mod:`~fem_anim.adjoint.tape` runs
-and keeps the forward states; :mod:`~fem_anim.adjoint.backward` sweeps back through the
-steps with the exact Hessian of each converged step; :mod:`~fem_anim.adjoint.objectives`
-says what is measured; :mod:`~fem_anim.adjoint.differentiate` ties them into
+and keeps the forward states (in memory, on disk, or checkpointed by the binomial schedule
+of :mod:`~fem_anim.adjoint.schedule` and recomputed); :mod:`~fem_anim.adjoint.backward`
+sweeps back through the steps with the exact Hessian of each converged step;
+:mod:`~fem_anim.adjoint.objectives` says what is measured;
+:mod:`~fem_anim.adjoint.differentiate` ties them into
 :func:`gradient`.
 """
 
@@ -14,6 +16,8 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "ParameterSet": "parameters",
     "Tape": "tape",
     "record_forward": "tape",
+    "choose_storage": "tape",
+    "BinomialSchedule": "schedule",
     "BackwardSweep": "backward",
     "CentreOfMassTarget": "objectives",
     "FormFunctional": "objectives",

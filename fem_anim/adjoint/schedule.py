@@ -14,10 +14,11 @@ checkpoint slots costs
 
 forward steps (advance j steps and store a checkpoint there; reverse the part behind it
 with one slot fewer; then the part before it with the slot freed). :func:`binomial_table`
-solves this recursion exactly by dynamic programming (vectorised over j; Griewank's
-closed form counts the re-recording of each reversed step too, which the sweep does not
-need: it holds s_{n+1} from the step it reversed before). The forward run that records the tape walks the first chain of splits from
-s_0 to s_{N-1} (N - 1 of T's steps), so the backward sweep recomputes
+solves this recursion exactly by dynamic programming, column by column in l and
+vectorised over s and j (Griewank's closed form counts a re-run of each reversed step too,
+which this sweep does not need: it holds s_{n+1} from the step it reversed before). The
+forward run that records the tape walks the first chain of splits from s_0 to s_{N-1}
+(N - 1 of T's steps), so the backward sweep recomputes
 T(N, c - 1) - (N - 1) steps (:meth:`BinomialSchedule.recomputations`).
 """
 
