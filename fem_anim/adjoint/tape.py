@@ -237,11 +237,13 @@ class Tape:
         """Yield (n, s_n, s_{n+1}) for n = N - 1, ..., 0 (collective: revolve re-runs steps).
 
         Between two yields the simulation may be re-stepped; the caller stages what it
-        needs after each yield.
+        needs after each yield. A tape is reversed once.
         """
         self.recomputed = 0
         if self.steps == 0:
             return
+        if "end" not in self._work:  # revolve's checkpoints are dropped on the way
+            raise RuntimeError("a tape is reversed once")
         end = self._work.pop("end")
         if self.storage == "revolve":
             schedule = BinomialSchedule(self.steps, self.checkpoints)
