@@ -116,7 +116,7 @@ class Tape:
         replay_mismatches: Recomputed states that differ from the recorded ones.
         peak_stored: The most states held in memory at once by the tape (revolve: its
             checkpoints; memory: all; disk: s_0), not counting the sweep's two working states.
-        peak_nbytes: Their bytes at that moment (this rank).
+        peak_nbytes: The most bytes they took at once (this rank).
     """
 
     h: float
@@ -142,7 +142,7 @@ class Tape:
     @property
     def states(self) -> "_StateView":
         """``states[n]``: s_n where the tape holds it (every n for memory and disk; for
-        revolve the checkpoints, s_N and the objective's steps, their u and v)."""
+        revolve the checkpoints it still holds and the objective's steps, u and v)."""
         return _StateView(self)
 
     @property
@@ -194,11 +194,10 @@ class Tape:
         self._account()
 
     def _account(self) -> None:
-        count = len(self._stored)
-        if count > self.peak_stored or (count == self.peak_stored and
-                                        self.nbytes > self.peak_nbytes):
-            self.peak_stored = count
-            self.peak_nbytes = sum(state_bytes(s) for s in self._stored.values())
+        """Update the peaks of the stored states' count and bytes."""
+        self.peak_stored = max(self.peak_stored, len(self._stored))
+        self.peak_nbytes = max(self.peak_nbytes,
+                               sum(state_bytes(s) for s in self._stored.values()))
 
     def _write(self, n: int, state: State) -> None:
         path = Path(tempfile.gettempdir())

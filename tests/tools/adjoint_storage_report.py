@@ -14,9 +14,12 @@ configurations: the largest relative difference to memory's is printed at the en
 Usage::
 
     .venv/bin/python tests/tools/adjoint_storage_report.py [STEPS] [CONFIG ...]
+    .venv/bin/python tests/tools/adjoint_storage_report.py --side-by-side STEPS [CONFIG ...]
 
 CONFIG is ``memory``, ``disk`` or ``revolve:C``; default STEPS = 1000 and
-``memory disk revolve:100 revolve:30 revolve:10``.
+``memory disk revolve:100 revolve:30 revolve:10``. ``--side-by-side`` runs the
+configurations' evaluations interleaved in one process and one model, two rounds, for
+time ratios under the same load (memory is not separated there).
 """
 
 from __future__ import annotations
@@ -71,7 +74,35 @@ def measure(steps: int, config: str) -> dict:
     return out
 
 
+def side_by_side(steps: int, configs: list[str], rounds: int) -> None:
+    """The configurations' evaluations interleaved in one process and one model (the
+    machine's load then falls on all of them alike): forward and backward times per round."""
+    from fem_anim.adjoint import AdjointModel, CentreOfMassTarget, PointTarget
+    from fem_anim.scene.loading import load_scene
+
+    scene = load_scene(None, [f"time.steps={steps}"])
+    model = AdjointModel(scene, ["material.youngs_modulus", "material.poisson_ratio",
+                                 "material.density"])
+    t = steps * scene["time"]["dt"]
+    objective = CentreOfMassTarget([[0.5, 0.0, -0.05]], [t]) + \
+        PointTarget([1.0, 0.1, 0.1], [[1.0, 0.1, 0.0]], [t])
+    for r in range(rounds):
+        for config in configs:
+            storage, _, count = config.partition(":")
+            model.storage, model.checkpoints = storage, int(count) if count else None
+            J, grad = model.evaluate(model.parameters.values(), objective)
+            print(json.dumps({"round": r, "config": config, "steps": steps,
+                              "forward_s": model.timing["forward"],
+                              "backward_s": model.timing["backward"],
+                              "recomputed": model.tape.recomputed, "J": J,
+                              "grad": [float(g) for g in grad]}), flush=True)
+            model.tape.close()
+
+
 def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "--side-by-side":
+        side_by_side(int(sys.argv[2]), sys.argv[3:] or CONFIGS, 2)
+        return
     if len(sys.argv) > 1 and sys.argv[1] == "--one":
         print("RESULT " + json.dumps(measure(int(sys.argv[2]), sys.argv[3])), flush=True)
         return
