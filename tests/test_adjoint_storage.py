@@ -25,6 +25,7 @@ import subprocess
 import sys
 from functools import lru_cache
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -39,6 +40,7 @@ from fem_anim.adjoint.schedule import BinomialSchedule, binomial_table
 from fem_anim.adjoint.tape import MEMORY_BUDGET, Tape, _fingerprint, choose_storage
 from fem_anim.errors import FemAnimError
 from fem_anim.simulation.integrators import State
+from fem_anim.solver.stopping import CONVERGED_REASONS
 
 MATERIAL = ["material.youngs_modulus", "material.poisson_ratio", "material.density",
             "initial.velocity"]
@@ -82,7 +84,7 @@ class CountingSim:
     def step(self, state, h):
         self.steps += 1
         return State(u=state.u + 1.0, v=state.v, a=state.a, time=state.time + h,
-                     step=state.step + 1), None
+                     step=state.step + 1), SimpleNamespace(reason=min(CONVERGED_REASONS))
 
 
 def counted_tape(steps: int, checkpoints: int) -> Tape:
