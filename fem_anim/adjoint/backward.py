@@ -262,7 +262,8 @@ class BackwardSweep:
 
         Args:
             sim: The :class:`~fem_anim.simulation.loop.Simulation` of the forward run.
-            tape: Its :class:`~fem_anim.adjoint.tape.Tape`.
+            tape: Its :class:`~fem_anim.adjoint.tape.Tape` (its ``reverse`` gives s_n and
+                s_{n+1}; the revolve storage re-steps ``sim`` between them).
             state_bars: For each state n, the objective's dJ/ds_n (field -> consistent local
                 array; absent fields are zero). Modified in place.
 
@@ -275,8 +276,9 @@ class BackwardSweep:
         names = self.parameters.names
         grad = dict.fromkeys(names, 0.0)
         zero = np.zeros_like(tape.states[0].u)
-        for n in range(tape.steps - 1, -1, -1):
-            start, end = tape.states[n], tape.states[n + 1]
+        # s_n and s_{n+1} backwards, from memory, disk or recomputed (revolve): between
+        # two steps of this loop the forward may have been re-stepped, so each is re-staged
+        for n, start, end in tape.reverse(sim):
             bar = {k: state_bars[n + 1].get(k, zero) for k in STATE_FIELDS}
             if self.handles and self.newmark:  # the handles' v and a: their rates at t
                 bar = self._handle_rates_bar(bar, end.time, grad)
@@ -286,7 +288,7 @@ class BackwardSweep:
             y_bar = sum(U[o, "y"] * bar[o] for o in STATE_FIELDS)
             s_bar = {k: sum(U[o, k] * bar[o] for o in STATE_FIELDS) for k in maps["inputs"]}
             # the step's objective as the forward staged it, at its solution
-            self.stage(sim, tape, n)
+            self.stage(sim, tape, n, start)
             p.u.x.array[:] = end.u
             self.solve("hessian", x_bar)
             if self.handles:  # x's pinned values u_D(t): x_bar - H lambda there
@@ -312,7 +314,7 @@ class BackwardSweep:
                 target["u"] = target["u"] + self._ipc_friction_bar()
         bar0 = {"u": state_bars[0].get("u", zero), "v": state_bars[0].get("v", zero)}
         if self.newmark:
-            u_part, v_part = self._initial_acceleration(tape.states[0], state_bars[0], grad)
+            u_part, v_part = self._initial_acceleration(tape.initial, state_bars[0], grad)
             bar0 = {"u": bar0["u"] + u_part, "v": bar0["v"] + v_part}
         #: dJ/du_0 and dJ/dv_0 per dof (consistent local arrays; zero on pinned dofs)
         self.initial_bar = {k: a.copy() for k, a in bar0.items()}
@@ -323,13 +325,12 @@ class BackwardSweep:
                 grad[name] += self.dot(bar0[field], basis)
         return np.array([grad[name] for name in names])
 
-    def stage(self, sim, tape, n: int) -> None:
+    def stage(self, sim, tape, n: int, start: State) -> None:
         """Stage step n's objective as the forward did (collective): the predictor, weight,
         damping anchor and pins from the state at its start, and IPC's recorded barrier
         stiffness (the adaptive schedule is not re-run: kappa and d_hat are constants of
-        the step) with friction lagged at u_n."""
+        the step) with friction lagged at u_n; ``start`` is s_n."""
         p, integ, h = self.problem, sim.integrator, tape.h
-        start = tape.states[n]
         u_pred = integ.predictor(h, start)
         damping = integ.damping_anchor(h, start) if p.damped else None
         ipc, p.ipc = p.ipc, None

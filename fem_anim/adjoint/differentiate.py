@@ -29,7 +29,7 @@ from mpi4py import MPI
 
 from fem_anim.adjoint.backward import BackwardSweep
 from fem_anim.adjoint.parameters import ParameterSet
-from fem_anim.adjoint.tape import Tape, record_forward
+from fem_anim.adjoint.tape import Tape, choose_storage, record_forward
 from fem_anim.errors import FemAnimError
 
 __all__ = ["ADJOINT_OPTIONS", "AdjointModel", "gradient"]
@@ -110,13 +110,20 @@ class AdjointModel:
         comm: MPI communicator.
         cli_options: PETSc options above :data:`ADJOINT_OPTIONS`.
         steps: Number of steps (default ``time.steps``); the step is ``time.dt``.
+        storage: Where the forward states are kept (:mod:`fem_anim.adjoint.tape`):
+            ``"memory"``, ``"revolve"`` (``checkpoints`` states in memory, the rest
+            recomputed by the binomial schedule), ``"disk"``, or ``"auto"`` (memory while
+            the states fit in :data:`~fem_anim.adjoint.tape.MEMORY_BUDGET`, else revolve).
+        checkpoints: Revolve's most stored states (default: as many as fit the budget).
 
     Raises:
-        FemAnimError: a scene feature or parameter the adjoint does not cover.
+        FemAnimError: a scene feature or parameter the adjoint does not cover, or a bad
+            storage or checkpoint count.
     """
 
     def __init__(self, scene, params: list[str], comm: MPI.Comm = MPI.COMM_WORLD,
-                 cli_options: dict[str, str] | None = None, steps: int | None = None):
+                 cli_options: dict[str, str] | None = None, steps: int | None = None,
+                 storage: str = "auto", checkpoints: int | None = None):
         from fem_anim.simulation.loop import Simulation
 
         check_differentiable(scene)
@@ -133,6 +140,12 @@ class AdjointModel:
         self.sweep = BackwardSweep(p, self.parameters, self.sim.integrator.name == "newmark")
         self.steps = int(scene["time"]["steps"] if steps is None else steps)
         self.h = float(scene["time"]["dt"])
+        ndofs = p.u.x.array.size
+        #: the resolved storage and checkpoint count (:func:`~fem_anim.adjoint.tape.
+        #: choose_storage`: decided from this rank's dofs, then the same on every rank)
+        self.storage, self.checkpoints = comm.bcast(
+            choose_storage(storage, checkpoints, self.steps, comm.allreduce(ndofs, op=MPI.MAX)),
+            root=0)
         self.tape: Tape | None = None
         #: Wall time (s) of the last evaluation's forward run and backward sweep.
         self.timing = {"forward": 0.0, "backward": 0.0}
@@ -147,12 +160,25 @@ class AdjointModel:
         """Run forward at ``theta`` (default: the current values) and return J (or None)."""
         if theta is not None:
             self.parameters.assign(theta)
-        self.tape = record_forward(self.sim, self.parameters, self.steps, self.h)
-        self.timing["forward"] = self.tape.forward_s
+        self._record(objective)
         if objective is None:
             return None
-        self.bind(objective)
         return objective.terms(self.tape)[0]
+
+    def _record(self, objective) -> None:
+        """The forward run, keeping the states the objective reads (collective)."""
+        if self.tape is not None:
+            self.tape.close()
+        observed = None
+        if objective is not None:
+            self.bind(objective)
+            try:
+                observed = objective.steps(self.h, self.steps)
+            except FemAnimError:  # a time off the steps: said by its terms, after the run
+                observed = None
+        self.tape = record_forward(self.sim, self.parameters, self.steps, self.h,
+                                   self.storage, self.checkpoints, observed)
+        self.timing["forward"] = self.tape.forward_s
 
     def evaluate(self, theta, objective) -> tuple[float, np.ndarray]:
         """J(theta) and dJ/dtheta (collective; the same on every rank).
@@ -161,12 +187,10 @@ class AdjointModel:
             ConvergenceError: a forward step did not converge (the gradient is undefined).
         """
         self.parameters.assign(theta)
-        self.tape = record_forward(self.sim, self.parameters, self.steps, self.h)
-        self.timing["forward"] = self.tape.forward_s
-        self.bind(objective)
+        self._record(objective)
         start = time.perf_counter()
         value, bars = objective.terms(self.tape)
-        state_bars = [{} for _ in self.tape.states]
+        state_bars = [{} for _ in range(self.tape.steps + 1)]
         for n, fields in bars.items():
             state_bars[n] = {k: self.sweep.consistent(a) for k, a in fields.items()}
         grad = self.sweep.run(self.sim, self.tape, state_bars)
@@ -208,7 +232,8 @@ class AdjointModel:
 
 
 def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORLD,
-             cli_options: dict[str, str] | None = None, per_cell: bool = False) -> tuple:
+             cli_options: dict[str, str] | None = None, per_cell: bool = False,
+             storage: str = "auto", checkpoints: int | None = None) -> tuple:
     """J and dJ/dtheta at the scene's own parameter values (collective).
 
     Args:
@@ -219,6 +244,8 @@ def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORL
         comm: MPI communicator.
         cli_options: PETSc options for the forward solver.
         per_cell: Also return the gradient per cell (:mod:`fem_anim.adjoint.cell_gradient`).
+        storage: ``"auto"``, ``"memory"``, ``"revolve"`` or ``"disk"`` (:class:`AdjointModel`).
+        checkpoints: Revolve's most stored states.
 
     Returns:
         J, and {parameter name: dJ/dparameter}; with ``per_cell`` also {parameter name:
@@ -229,11 +256,14 @@ def gradient(scene, objective, params: list[str], comm: MPI.Comm = MPI.COMM_WORL
         FemAnimError: a parameter the scene does not have or a feature not covered.
         ConvergenceError: a forward step did not converge.
     """
-    model = AdjointModel(scene, params, comm, cli_options)
+    model = AdjointModel(scene, params, comm, cli_options, storage=storage,
+                         checkpoints=checkpoints)
     value, grad = model.evaluate(model.parameters.values(), objective)
     grads = dict(zip(model.names, map(float, grad)))
+    cells = None
     if per_cell:
         from fem_anim.adjoint.cell_gradient import cell_functions
 
-        return value, grads, cell_functions(model)
-    return value, grads
+        cells = cell_functions(model)
+    model.tape.close()
+    return (value, grads) if cells is None else (value, grads, cells)

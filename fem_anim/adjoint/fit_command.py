@@ -54,6 +54,12 @@ def build_fit_parser() -> OneLineParser:
                         metavar="KEY=VALUE", help="override a scene key (value parsed as TOML)")
     parser.add_argument("--max-iterations", type=int, default=30,
                         help="L-BFGS-B's iteration budget (default 30)")
+    parser.add_argument("--storage", default="auto",
+                        choices=["auto", "memory", "revolve", "disk"],
+                        help="where the forward states are kept (default auto: memory while "
+                        "they fit in 256 MiB per rank, else revolve)")
+    parser.add_argument("--checkpoints", type=int, default=None, metavar="C",
+                        help="revolve's most states kept in memory (default: as many as fit)")
     parser.add_argument("-o", "--output", help="output directory (default out/<scene>-fit)")
     parser.add_argument("-q", "--quiet", action="store_true", help="print only errors")
     return parser
@@ -117,7 +123,8 @@ def fit_command(argv: list[str], cli_options: dict[str, str]) -> int:
 
     comm = MPI.COMM_WORLD
     quiet_jit_logging()
-    model = AdjointModel(scene, args.param, comm, cli_options)
+    model = AdjointModel(scene, args.param, comm, cli_options, storage=args.storage,
+                         checkpoints=args.checkpoints)
     start = model.parameters.values()
     bounds = parse_bounds(args.bounds, model.names,
                           [default_bounds(n, t) for n, t in zip(model.names, start)])

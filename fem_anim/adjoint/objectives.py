@@ -60,6 +60,11 @@ class Objective:
         """J (the same on every rank) and {n: {"u": dJ/du_n, "v": dJ/dv_n}} (additive)."""
         raise NotImplementedError
 
+    def steps(self, h: float, steps: int) -> set[int] | None:
+        """The state indices n whose u and v :meth:`terms` reads, for a run of ``steps``
+        steps of ``h`` (None: possibly all; the revolve storage then keeps every u and v)."""
+        return None
+
     def __add__(self, other: Objective) -> Objective:
         return Sum([self, other])
 
@@ -75,6 +80,10 @@ class Sum(Objective):
     def bind(self, model) -> None:
         for part in self.parts:
             part.bind(model)
+
+    def steps(self, h, steps):
+        parts = [part.steps(h, steps) for part in self.parts]
+        return None if any(s is None for s in parts) else set().union(*parts)
 
     def terms(self, tape):
         value, bars = 0.0, {}
@@ -116,6 +125,9 @@ class PointTarget(Objective):
         self.X = X[self.node] if self.node is not None else None
         self.comm, self.d = p.comm, p.d
 
+    def steps(self, h, steps):
+        return {step_index(t, h, steps) for t in self.times}
+
     def terms(self, tape):
         value, bars = 0.0, {}
         for t, target in zip(self.times, self.targets):
@@ -156,6 +168,9 @@ class CentreOfMassTarget(Objective):
         self.m = m.reshape(-1, p.d)  # owned rows only nonzero
         self.total = self.comm.allreduce(self.m.sum(axis=0), op=MPI.SUM)
         self.c0 = center_of_mass(p)
+
+    def steps(self, h, steps):
+        return {step_index(t, h, steps) for t in self.times}
 
     def terms(self, tape):
         value, bars = 0.0, {}
@@ -211,6 +226,10 @@ class TrajectoryMatch(Objective):
         self.comm, self.d = p.comm, p.d
         self.frames = [(float(t), run.displacement(f)) for f, t in enumerate(run.times) if f > 0]
 
+    def steps(self, h, steps):
+        return {step_index(t, h, steps) for t, _ in self.frames
+                if t <= steps * h * (1.0 + 1e-12)}
+
     def terms(self, tape):
         value, bars = 0.0, {}
         matched = 0
@@ -248,6 +267,9 @@ class StateFunctional(Objective):
         self.comm = p.comm
         self.owned = p.V.dofmap.index_map.size_local * p.d
 
+    def steps(self, h, steps):
+        return {steps if self.time is None else step_index(self.time, h, steps)}
+
     def terms(self, tape):
         n = tape.steps if self.time is None else step_index(self.time, tape.h, tape.steps)
         u = tape.states[n].u
@@ -276,6 +298,9 @@ class FormFunctional(Objective):
         self.value_form = fem.form(form)
         self.gradient_form = fem.form(ufl.derivative(form, self.u, ufl.TestFunction(p.V)))
         self.owned = p.V.dofmap.index_map.size_local * p.d
+
+    def steps(self, h, steps):
+        return {steps if self.time is None else step_index(self.time, h, steps)}
 
     def terms(self, tape):
         n = tape.steps if self.time is None else step_index(self.time, tape.h, tape.steps)

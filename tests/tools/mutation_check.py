@@ -1425,6 +1425,39 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_adjoint_initial.py::"
               "test_per_node_initial_state_taylor[u-0.01-beam-implicit_euler]",),
              "a per-node initial displacement not passed to the forward run"),
+    # -- the adjoint's forward states: memory, revolve, disk (fem_anim/adjoint/tape.py) ----
+    Mutation("adjoint-revolve-off-by-one", "fem_anim/adjoint/tape.py",
+             "        for k in range(a, n):", "        for k in range(a, n - 1):",
+             ("tests/test_adjoint_storage.py::test_revolve_and_disk_give_the_in_memory_gradient"
+              "_bit_for_bit[implicit_euler]",),
+             "a recomputed state is one step short of the one the sweep asked for"),
+    Mutation("adjoint-revolve-stale-bdf2", "fem_anim/adjoint/tape.py",
+             "            self._stored[n] = state\n",
+             "            self._stored[n] = state if self.storage == \"memory\" else State(\n"
+             "                u=state.u, v=state.v, a=state.a, time=state.time, step=state.step)\n",
+             ("tests/test_adjoint_storage.py::test_revolve_and_disk_give_the_in_memory_gradient"
+              "_bit_for_bit[bdf2]",),
+             "a checkpoint keeps u, v, a only: BDF2 restarts from it without u_{n-1}, v_{n-1}"),
+    Mutation("adjoint-disk-newmark-acceleration", "fem_anim/adjoint/tape.py",
+             'a=arrays["a"],', 'a=np.zeros_like(arrays["u"]),',
+             ("tests/test_adjoint_storage.py::test_revolve_and_disk_give_the_in_memory_gradient"
+              "_bit_for_bit[newmark]",),
+             "Newmark's acceleration is not read back from the state files"),
+    Mutation("adjoint-revolve-hessian-pattern", "fem_anim/adjoint/tape.py",
+             '    if "couplings" in carry:\n        fresh_hessian(sim, carry["couplings"])\n', "",
+             ("tests/test_adjoint_storage.py::test_revolve_and_disk_give_the_in_memory_gradient"
+              "_bit_for_bit[ipc_friction_adaptive]",),
+             "a recomputed IPC step factorises the Hessian with the run's final contact pattern"),
+    Mutation("adjoint-schedule-free-advance", "fem_anim/adjoint/schedule.py",
+             "        total = j[None, :] + cost[s - 1][:, l - j]",
+             "        total = cost[s - 1][:, l - j]",
+             ("tests/test_adjoint_storage.py::test_binomial_table_equals_the_recursive_search",),
+             "the schedule's table does not count the advance to a new checkpoint"),
+    Mutation("adjoint-revolve-observed-dropped", "fem_anim/adjoint/tape.py",
+             '        if observed and self.storage == "revolve":',
+             '        if observed and self.storage == "revolve" and n not in self._stored:',
+             ("tests/test_adjoint_storage.py::test_revolve_keeps_the_objective_states_only",),
+             "a checkpoint the objective reads is not kept after the sweep drops it"),
 ]
 
 
