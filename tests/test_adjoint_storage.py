@@ -32,6 +32,10 @@ import pytest
 from conftest import ROOT, clean_environment, mpirun_command
 from test_adjoint import PARAMS, fem_anim_cli, fit_setup, objective, scene_dict  # noqa: F401
 from test_adjoint_contact import BODY, cubes_objective, cubes_scene, plane_objective, plane_scene
+from test_adjoint_handles import HANDLE
+from test_adjoint_handles import beam_scene as dragged_beam
+from test_adjoint_initial import BEAM
+from test_adjoint_initial import beam_scene as spinning_beam
 
 import fem_anim
 from fem_anim.adjoint.differentiate import AdjointModel
@@ -147,7 +151,11 @@ CASES = {"implicit_euler": (lambda: scene_dict("implicit_euler", steps=9), PARAM
                             plane_objective),
          "ipc_friction_adaptive": (lambda: cubes_scene("implicit_euler", friction=0.3,
                                                        stiffness="adaptive"), BODY,
-                                   cubes_objective)}
+                                   cubes_objective),
+         # the initial spin and displacement (step 0 recomputed from them), a handle's
+         # velocity with Newmark's prescribed rates
+         "spin_displacement_bdf2": (lambda: spinning_beam("bdf2"), BEAM, objective),
+         "handle_newmark": (lambda: dragged_beam("newmark"), HANDLE, objective)}
 
 
 @pytest.mark.parametrize("case", list(CASES))
