@@ -92,6 +92,43 @@ def run_on_one_and_more_ranks(scene: Path, folder: Path, ranks: int = 2) -> dict
     return outs
 
 
+def gradients_on_two_ranks_equal_serial(script: str, serial) -> None:
+    """J and the gradient of each scene of ``serial()`` (scene -> ``{"J": ..., "grad": [...]}``)
+    equal those of ``script`` under ``mpirun -n 2`` to 1e-8 (skipped without mpirun).
+
+    Args:
+        script: A test module whose ``__main__`` prints the same dict as JSON on rank 0
+            (:func:`print_on_rank_zero`).
+        serial: Computes the dict in this process.
+    """
+    import json
+    import subprocess
+
+    import numpy as np
+
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    r = subprocess.run([*mpirun, sys.executable, script], capture_output=True, text=True,
+                       timeout=900, env=clean_environment(), cwd=ROOT)
+    assert r.returncode == 0, r.stdout + r.stderr
+    parallel = json.loads(r.stdout.strip().splitlines()[-1])
+    for scene, result in serial().items():
+        assert parallel[scene]["J"] == pytest.approx(result["J"], rel=1e-8), scene
+        np.testing.assert_allclose(parallel[scene]["grad"], result["grad"], rtol=1e-8,
+                                   atol=1e-8 * np.abs(result["grad"]).max())
+
+
+def print_on_rank_zero(result: dict) -> None:
+    """``result`` as one JSON line on rank 0 (a ``__main__`` run by mpirun)."""
+    import json
+
+    from mpi4py import MPI
+
+    if MPI.COMM_WORLD.rank == 0:
+        print(json.dumps(result))
+
+
 def step_taylor_remainders(problem, A, x, dx) -> tuple[list[float], list[float]]:
     """The Taylor remainders of a step objective along ``dx`` from ``x``, h = 1, 1/2, 1/4, 1/8:
     |g(x + h dx) - g(x) - h r(x).dx| and ||r(x + h dx) - r(x) - h H(x) dx|| (both fall at

@@ -22,13 +22,9 @@ nodes) and a body's ``body.NAME.initial.*``; and a region's density while the bo
 
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
-
 import numpy as np
 import pytest
-from conftest import ROOT, clean_environment, mpirun_command
+from conftest import gradients_on_two_ranks_equal_serial, print_on_rank_zero
 from scenes import scene_toml
 from test_adjoint import fem_anim_cli, objective, orders
 from test_adjoint_contact import contacts, cubes_objective, cubes_scene, plane_objective, \
@@ -304,22 +300,8 @@ def mpi_gradients() -> dict:
 
 @pytest.mark.mpi
 def test_two_ranks_give_the_serial_gradient():
-    mpirun = mpirun_command(2)
-    if mpirun is None:
-        pytest.skip("mpirun not available")
-    r = subprocess.run([*mpirun, sys.executable, __file__], capture_output=True, text=True,
-                       timeout=900, env=clean_environment(), cwd=ROOT)
-    assert r.returncode == 0, r.stdout + r.stderr
-    parallel = json.loads(r.stdout.strip().splitlines()[-1])
-    for scene, result in mpi_gradients().items():
-        assert parallel[scene]["J"] == pytest.approx(result["J"], rel=1e-8), scene
-        np.testing.assert_allclose(parallel[scene]["grad"], result["grad"], rtol=1e-8,
-                                   atol=1e-8 * np.abs(result["grad"]).max())
+    gradients_on_two_ranks_equal_serial(__file__, mpi_gradients)
 
 
 if __name__ == "__main__":
-    from mpi4py import MPI
-
-    result = mpi_gradients()
-    if MPI.COMM_WORLD.rank == 0:
-        print(json.dumps(result))
+    print_on_rank_zero(mpi_gradients())
