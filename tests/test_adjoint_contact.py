@@ -34,7 +34,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, clean_environment, mpirun_command
 from scenes import scene_toml
-from test_adjoint import fem_anim_cli, orders
+from test_adjoint import central_differences, fem_anim_cli, orders, taylor_remainders
 
 import fem_anim
 from fem_anim.adjoint.differentiate import AdjointModel
@@ -148,31 +148,11 @@ def test_contact_taylor_remainders_fall_at_orders_one_and_two(scene, integrator,
     theta = model.parameters.values()
     J0, grad = model.evaluate(theta, obj)
     assert sum(contacts(model)) > 0, "the scene makes no contact"
-    kappa = model.tape.barrier_stiffness
     delta = SCALE[scene] * direction(model, kind)
-    first, second = [], []
-    for k in range(6):
-        eps = 0.5 ** k
-        J = model.forward(theta + eps * delta, obj)
-        assert model.tape.barrier_stiffness == kappa  # one piece of the discrete map
-        first.append(J - J0)
-        second.append(J - J0 - eps * grad @ delta)
-    model.parameters.assign(theta)
+    first, second = taylor_remainders(model, obj, theta, delta, J0, grad, 1.0, 6)
     assert abs(orders(first)[-1] - 1.0) < 0.1, (first, orders(first))
     # asymptotic: the largest steps cross the C^1 seams of IPC's distance types
     assert orders(second)[-1] >= 1.9 and orders(second)[-2] > 1.5, (second, orders(second))
-
-
-def central_differences(model, obj, theta) -> np.ndarray:
-    out = []
-    for i in range(theta.size):
-        eps = 1e-5 * max(abs(theta[i]), 1.0)
-        up, down = theta.copy(), theta.copy()
-        up[i] += eps
-        down[i] -= eps
-        out.append((model.forward(up, obj) - model.forward(down, obj)) / (2.0 * eps))
-    model.parameters.assign(theta)
-    return np.array(out)
 
 
 @pytest.mark.parametrize("scene,integrator", CASES)

@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 from conftest import gradients_on_two_ranks_equal_serial, print_on_rank_zero
 from scenes import scene_toml
-from test_adjoint import fem_anim_cli, objective, orders, scene_dict
+from test_adjoint import (central_differences, fem_anim_cli, objective, orders, scene_dict,
+                         taylor_remainders)
 from test_adjoint_contact import contacts, cubes_scene, plane_objective, plane_scene
 
 import fem_anim
@@ -75,29 +76,9 @@ def test_taylor_remainders_fall_at_orders_one_and_two(scene, integrator):
     if scene == "plane":
         assert sum(contacts(model)) > 0, "the scene makes no contact"
     delta = np.array([DIRECTION.get(n, 0.0) for n in model.names])
-    first, second = [], []
-    for k in range(6):
-        eps = 0.5 ** (k + 1)
-        try:
-            J = model.forward(theta + eps * delta, obj)
-        finally:  # the models are shared between tests
-            model.parameters.assign(theta)
-        first.append(J - J0)
-        second.append(J - J0 - eps * grad @ delta)
+    first, second = taylor_remainders(model, obj, theta, delta, J0, grad, 0.5, 6)
     assert abs(orders(first)[-1] - 1.0) < 0.1, (first, orders(first))
     assert orders(second)[-1] >= 1.9 and orders(second)[-2] > 1.5, (second, orders(second))
-
-
-def central_differences(model, obj, theta) -> np.ndarray:
-    out = []
-    for i in range(theta.size):
-        eps = 1e-5 * max(abs(theta[i]), 1.0)
-        up, down = theta.copy(), theta.copy()
-        up[i] += eps
-        down[i] -= eps
-        out.append((model.forward(up, obj) - model.forward(down, obj)) / (2.0 * eps))
-    model.parameters.assign(theta)
-    return np.array(out)
 
 
 @pytest.mark.parametrize("scene,integrator", [

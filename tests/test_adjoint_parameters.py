@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_adjoint import objective, orders, scene_dict
+from test_adjoint import objective, orders, scene_dict, taylor_remainders
 
 import fem_anim
 from fem_anim.adjoint.differentiate import AdjointModel
@@ -69,13 +69,7 @@ def test_taylor_remainders_fall_at_orders_one_and_two(which, integrator, name):
     theta = model.parameters.values()
     J0, grad = model.evaluate(theta, obj)
     delta = np.array([DIRECTIONS[name] if n == name else 0.0 for n in model.names])
-    first, second = [], []
-    for k in range(5):
-        eps = 0.25 * 0.5 ** k
-        J = model.forward(theta + eps * delta, obj)
-        first.append(J - J0)
-        second.append(J - J0 - eps * grad @ delta)
-    model.parameters.assign(theta)
+    first, second = taylor_remainders(model, obj, theta, delta, J0, grad, 0.25, 5)
     assert abs(orders(first)[-1] - 1.0) < 0.1, (first, orders(first))
     assert orders(second)[-1] >= 1.9 and np.all(orders(second) > 1.5), (second, orders(second))
 
