@@ -73,7 +73,7 @@ def test_distributed_contact_equals_serial(tmp_path):
     assert two["rebuilt"] == 1 and one["rebuilt"] == 0  # one rank's mesh: the whole surface
     assert one["final_pairs"] > 100 and one["moved_pairs"] > 10
     for key, value in one.items():
-        if key in ("local_faces", "rebuilt"):
+        if key in ("local_faces", "rebuilt", "final_local_bodies", "final_own_bodies"):
             continue
         other = two[key]
         scale = np.max(np.abs(value)) if np.all(np.isfinite(value)) else 1.0
@@ -84,3 +84,30 @@ def test_distributed_contact_equals_serial(tmp_path):
             assert np.array_equal(value, other), key
     # the CCD bounds bind (a bound of 1 would not test the sweep)
     assert one["final_wide_step_bound"] < 1 and one["moved_wide_step_bound"] < 1
+
+
+@pytest.mark.mpi
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches mpirun itself")
+def test_local_meshes_hold_their_share_and_a_halo(tmp_path):
+    """Each rank's local mesh is its facets plus the remote facets near them that can serve
+    one of its pairs: bars 2 and 3 (0.45 m and more from everything) stay out of every
+    other rank's mesh, and the highest rank, whose vertices no lower rank's facet touches
+    (whole bodies per rank), holds no remote facet at all (a facet whose vertices all
+    belong to lower ranks serves no pair it owns)."""
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    out = tmp_path / "n2.npz"
+    r = subprocess.run([*mpirun, sys.executable, str(SCRIPT), str(out)], capture_output=True,
+                       text=True, timeout=900, env=clean_environment(), cwd=ROOT)
+    assert r.returncode == 0, r.stdout + r.stderr
+    two = dict(np.load(out))
+    local, own = two["final_local_bodies"], two["final_own_bodies"]  # (ranks, bodies)
+    per_body = own.sum(axis=0)
+    assert np.all(np.sort(own, axis=0)[-1] == per_body)  # each body on one rank, whole
+    assert np.all(local >= own) and own[:, 0].sum() > 0
+    for body in (2, 3):  # the far bars: only their own rank holds them
+        assert np.array_equal(local[:, body], own[:, body]), (body, local, own)
+    # bars 0 and 1 touch: the lower rank holds the other's bar, the higher only its own
+    assert np.array_equal(local[-1], own[-1]), (local, own)
+    assert local[0].sum() > own[0].sum()

@@ -13,7 +13,8 @@ a displacement moved past the halo's margin (so the halo is rebuilt mid-evaluati
 one with a sweep wider than the halo (so the CCD builds a wider local mesh). Rank 0 writes
 every per-dof array in the order of the dof coordinates, so runs on different rank counts
 compare entry by entry, with the trajectory (u after each step) and, per rank, how many
-facets its local mesh holds against the whole surface and how many halos it built.
+facets its local mesh holds against the whole surface (and, at the final state, by body)
+and how many halos it built.
 """
 
 from __future__ import annotations
@@ -133,6 +134,12 @@ def main() -> int:
         state, _ = sim.step(state, 0.01)
         out[f"u{k}"] = gather_sorted(sim, sim.problem.u.x.array)
     evaluate(sim, "final", out)
+    # what each rank's local mesh holds at the final state, by body: facets (own and
+    # halo) and own facets
+    local_body = ipc.halo.vertex_body[ipc.halo.faces[:, 0]]
+    counts = np.stack([np.bincount(local_body, minlength=4),
+                       np.bincount(ipc.part.body, minlength=4)])
+    counts = COMM.gather(counts, root=0)
     # past the margin: the halo is rebuilt inside the next evaluation
     halo = ipc.halo
     sim.problem.u.x.array[:] += field(sim, lambda X: 0.008 * np.sign(X[:, [0]] - 0.25)
@@ -143,6 +150,8 @@ def main() -> int:
     own = COMM.gather(len(ipc.part.faces), root=0)
     if COMM.rank == 0:
         out["local_faces"] = np.array(faces)
+        out["final_local_bodies"] = np.array([c[0] for c in counts])
+        out["final_own_bodies"] = np.array([c[1] for c in counts])
         out["surface_faces"] = sum(own)
         np.savez(path, **out)
         print(f"local facets per rank {faces} of {sum(own)}; halo rebuilt {out['rebuilt']}; "
