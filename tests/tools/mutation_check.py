@@ -1458,6 +1458,26 @@ MUTATIONS: list[Mutation] = [
              '        if observed and self.storage == "revolve" and n not in self._stored:',
              ("tests/test_adjoint_storage.py::test_revolve_keeps_the_objective_states_only",),
              "a checkpoint the objective reads is not kept after the sweep drops it"),
+    Mutation("halo-radius-unbounded", "fem_anim/contact/distribution.py",
+             "self.radius = radius = float(reach(self.longest))",
+             "self.radius = radius = 10 * float(reach(self.longest))",
+             ("tests/test_contact_distribution.py::"
+              "test_local_meshes_hold_their_share_and_a_halo",),
+             "the halo reaches ten times too far: far bodies enter every rank's local mesh "
+             "and each rank's detection runs over most of the surface"),
+    Mutation("halo-sends-lower-ranks-facets", "fem_anim/contact/distribution.py",
+             "                    mask &= top >= starts[q]",
+             "                    pass",
+             ("tests/test_contact_distribution.py::"
+              "test_local_meshes_hold_their_share_and_a_halo",),
+             "a rank receives facets whose vertices all belong to lower ranks, which serve "
+             "none of its pairs"),
+    Mutation("ownership-filter-unnegated", "fem_anim/contact/distribution.py",
+             "at_or_above = ~ipctk.make_static_obstacle_filter(int(first))",
+             "at_or_above = ipctk.make_static_obstacle_filter(int(first))",
+             ("tests/test_contact_distribution.py::test_distributed_contact_equals_serial",),
+             "the broad-phase filter keeps pairs below the first owned vertex instead of "
+             "above it: rank 0 detects no pair, and owned pairs go missing"),
 ]
 
 
