@@ -5,7 +5,9 @@ gathers the whole surface, and the results equal serial to 1e-8. The MPI case ru
 ``tests/mpi/mpi_contact_halo_check.py`` on 1 and on 2 ranks (two pairs of bars thrown
 together, with friction) and compares the trajectory, the barrier energy, gradient, Hessian
 action, CCD bounds (one inside the halo, one wider than it), pair count and minimum
-distance, at a state in contact and after a move past the halo's margin. The serial cases
+distance, at a state in contact and after a move past the halo's margin (to 1e-8: the
+trajectories differ by round-off), and at one state (the final one rounded to 0.1 um: the same
+bits on 1 and 2 ranks) with pairs across the ranks (to 1e-10). The serial cases
 check the pieces of the distribution on one rank.
 """
 
@@ -73,7 +75,8 @@ def test_distributed_contact_equals_serial(tmp_path):
     assert two["rebuilt"] == 1 and one["rebuilt"] == 0  # one rank's mesh: the whole surface
     assert one["final_pairs"] > 100 and one["moved_pairs"] > 10
     for key, value in one.items():
-        if key in ("local_faces", "rebuilt", "final_local_bodies", "final_own_bodies"):
+        if key in ("local_faces", "rebuilt", "final_local_bodies", "final_own_bodies") or \
+                key.startswith("set_"):
             continue
         other = two[key]
         scale = np.max(np.abs(value)) if np.all(np.isfinite(value)) else 1.0
@@ -84,6 +87,18 @@ def test_distributed_contact_equals_serial(tmp_path):
             assert np.array_equal(value, other), key
     # the CCD bounds bind (a bound of 1 would not test the sweep)
     assert one["final_wide_step_bound"] < 1 and one["moved_wide_step_bound"] < 1
+    # at one state (the final one rounded to 0.1 um: the same bits on 1 and 2 ranks), with
+    # pairs between bars 0 and 1 on two ranks (each owned by the rank of its lowest vertex,
+    # its rows partly sent to the other): the barrier's energy, gradient and Hessian action
+    # equal serial to 1e-10 (only the order of sums differs)
+    own = two["final_own_bodies"]
+    assert np.argmax(own[:, 0]) != np.argmax(own[:, 1])  # the touching bars on two ranks
+    assert one["set_pairs"] > 100
+    assert two["set_owned_pairs"].sum() == one["set_pairs"] == two["set_pairs"]
+    for key in ("set_energy", "set_gradient", "set_Hz0", "set_Hz1", "set_min_distance"):
+        scale = np.max(np.abs(one[key]))
+        assert scale > 0 and np.max(np.abs(one[key] - two[key])) <= 1e-10 * scale, key
+    assert one["set_step_bound"] == two["set_step_bound"] < 1
 
 
 @pytest.mark.mpi

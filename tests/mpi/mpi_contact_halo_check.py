@@ -10,7 +10,9 @@ the final state, the barrier energy (with friction), its gradient, the action H 
 Hessian on two vectors z fixed by the dof coordinates, the CCD bound along a vector fixed
 by the coordinates, the pair count and the minimum distance are evaluated; a second set at
 a displacement moved past the halo's margin (so the halo is rebuilt mid-evaluation) and
-one with a sweep wider than the halo (so the CCD builds a wider local mesh). Rank 0 writes
+one with a sweep wider than the halo (so the CCD builds a wider local mesh); a last set at
+the final state rounded to 0.1 um, the same state to the bit on any number of ranks, with
+each rank's count of owned pairs. Rank 0 writes
 every per-dof array in the order of the dof coordinates, so runs on different rank counts
 compare entry by entry, with the trajectory (u after each step) and, per rank, how many
 facets its local mesh holds against the whole surface (and, at the final state, by body)
@@ -133,6 +135,7 @@ def main() -> int:
     for k in range(steps):
         state, _ = sim.step(state, 0.01)
         out[f"u{k}"] = gather_sorted(sim, sim.problem.u.x.array)
+    u_final = sim.problem.u.x.array.copy()
     evaluate(sim, "final", out)
     # what each rank's local mesh holds at the final state, by body: facets (own and
     # halo) and own facets
@@ -146,10 +149,16 @@ def main() -> int:
                                       * np.array([[0, 0, 1.0]]))
     evaluate(sim, "moved", out)
     out["rebuilt"] = int(ipc.halo is not halo)
+    # the final state rounded to 0.1 um: the same bits on any number of ranks (the runs'
+    # states differ by ~1e-16 m), still in contact along the bars (pairs across the ranks)
+    sim.problem.u.x.array[:] = np.round(u_final, 7)
+    evaluate(sim, "set", out)
+    owned = COMM.gather(len(ipc.collisions), root=0)
     faces = COMM.gather(len(ipc.halo.faces), root=0)
     own = COMM.gather(len(ipc.part.faces), root=0)
     if COMM.rank == 0:
         out["local_faces"] = np.array(faces)
+        out["set_owned_pairs"] = np.array(owned)
         out["final_local_bodies"] = np.array([c[0] for c in counts])
         out["final_own_bodies"] = np.array([c[1] for c in counts])
         out["surface_faces"] = sum(own)
