@@ -6,9 +6,12 @@ Runs ``STEPS`` implicit-Euler steps of :func:`fem_anim.bench.contact_cost.pile_s
 boxes meshed with element size ``H``) under cProfile with a CPU-time clock
 (``time.process_time``) on every rank, and prints per rank and per step the CPU seconds of
 ipctk's detection (``NormalCollisions.build``), its CCD, the cut to owned pairs
-(:func:`fem_anim.contact.distribution.owned_collisions`) and the halo builds
-(``SurfaceHalo.__init__``, with their count), the Newton iterations, and how many surface
-facets the rank's local mesh held after each step. CPU seconds of these compute parts are
+(:func:`fem_anim.contact.distribution.owned_collisions`) and the halo builds (the
+``__init__`` of ``SurfaceHalo`` and of its ``VertexExchange``; and how many halos were
+built), the Newton iterations, how many surface facets the rank's local mesh held after
+each step and, at the end, how many facets of the whole surface have a vertex within
+d_hat + k L of one of the rank's owned surface vertices (k = 2, 3, 5; L the longest surface
+edge): the least a halo of that radius can hold. CPU seconds of these compute parts are
 less distorted by a loaded machine than wall seconds (MPI waits are outside them). Each
 step's displacement, in the order of the dof coordinates, is written to
 ``OUTDIR/u{step}_n{R}.npy`` and the Newton counts to ``OUTDIR/its_n{R}.txt``, so runs on
@@ -79,9 +82,24 @@ def main() -> int:
         parts.append(f"{name.replace('<built-in method ', '').rstrip('>')} "
                      f"{cpu / steps:.3f} s ({calls} calls)")
     surface = comm.allreduce(len(ipc.part.faces))
+    builds = ipc.halo_builds
+    # facets of the whole surface with a vertex near an owned surface vertex
+    from scipy.spatial import cKDTree
+
+    part, u_owned = ipc.part, ipc._u_owned()
+    x = part.rest + part.face_exchange.fetch(u_owned)[np.searchsorted(part.face_vertices,
+                                                                       part.faces)]
+    every = np.concatenate(comm.allgather(x)).reshape(-1, 3)
+    tree = cKDTree(part.owned_rest + u_owned[part.blocks])
+    near = []
+    for k in (2, 3, 5):
+        d, _ = tree.query(every, distance_upper_bound=ipc.dhat + k * ipc.halo.longest)
+        near.append(f"d_hat + {k} L: {int(np.isfinite(d).reshape(-1, 3).any(axis=1).sum())}")
     lines = comm.gather(f"rank {comm.rank}: CPU per step: " + ", ".join(parts)
-                        + f"; Newton iterations per step {its / steps:.1f}; local facets "
-                        f"{local} of {surface}", root=0)
+                        + f"; halos built {builds}; Newton iterations per step "
+                        f"{its / steps:.1f}; local facets {local} of {surface}; facets near "
+                        "owned vertices " + ", ".join(near)
+                        + f" (L = {ipc.halo.longest:.4f} m)", root=0)
     if comm.rank == 0:
         print("\n".join(lines), flush=True)
     return 0
