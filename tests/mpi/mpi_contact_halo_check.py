@@ -143,10 +143,11 @@ def main() -> int:
     counts = np.stack([np.bincount(local_body, minlength=4),
                        np.bincount(ipc.part.body, minlength=4)])
     counts = COMM.gather(counts, root=0)
-    # past the margin: the halo is rebuilt inside the next evaluation
+    # past the margin: the halo is rebuilt inside the next evaluation (a shear that changes
+    # the pairs, and a translation along the bars by more than any margin, at most L)
     halo = ipc.halo
     sim.problem.u.x.array[:] += field(sim, lambda X: 0.008 * np.sign(X[:, [0]] - 0.25)
-                                      * np.array([[0, 0, 1.0]]))
+                                      * np.array([[0, 0, 1.0]]) + np.array([[0.1, 0, 0]]))
     evaluate(sim, "moved", out)
     out["rebuilt"] = int(ipc.halo is not halo)
     # the final state rounded to 0.1 um: the same bits on any number of ranks (the runs'
