@@ -195,8 +195,12 @@ def _baseline(scene, domain):
                        pins)
 
 
-def _baseline_run(scene, domain, frames: int):
+def _baseline_run(scene, domain, frames: int, velocity=None):
+    """The baseline's frames from rest, or from the vertex velocities ``velocity`` (n, 3)
+    (m/s; fem_anim's initial state, for a scene with ``[body.initial]``)."""
     sim = _baseline(scene, domain)
+    if velocity is not None:
+        sim.v = np.asarray(velocity, float).ravel().copy()
     dt = scene["time"]["dt"]
     rows, shots = [], [np.zeros_like(domain.points)]
     for k in range(frames):

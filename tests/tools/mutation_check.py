@@ -1458,6 +1458,27 @@ MUTATIONS: list[Mutation] = [
              '        if observed and self.storage == "revolve" and n not in self._stored:',
              ("tests/test_adjoint_storage.py::test_revolve_keeps_the_objective_states_only",),
              "a checkpoint the objective reads is not kept after the sweep drops it"),
+    Mutation("contact-cost-setup-in-first-step", "fem_anim/bench/contact_cost.py",
+             "split[key] = ipc.timers[key] = 0.0",
+             "split[key] = 0.0",
+             ("tests/test_contact_cost.py::test_printed_numbers_recompute_from_the_csvs",),
+             "the contact bench counts ipctk's set-up time (before the first step) in step 1"),
+    Mutation("contact-cost-baseline-from-rest", "fem_anim/bench/contact_cost.py",
+             "contact_set._baseline_run(scene, sim.domain, steps, velocity)",
+             "contact_set._baseline_run(scene, sim.domain, steps)",
+             ("tests/test_contact_cost.py::test_baseline_follows_the_same_bodies",),
+             "the baseline starts the thrown boxes at rest, not at the scene's initial velocity"),
+    Mutation("contact-cost-ratio-inverted", "fem_anim/bench/contact_cost.py",
+             'ratio = fa["s_per_step"] / bl["s_per_step"]',
+             'ratio = bl["s_per_step"] / fa["s_per_step"]',
+             ("tests/test_contact_cost.py::test_printed_numbers_recompute_from_the_csvs",),
+             "the printed ratio is the baseline's s/step over fem_anim's"),
+    Mutation("contact-cost-wall-without-retries", "fem_anim/bench/contact_cost.py",
+             "wall = comm.allreduce(time.perf_counter() - start, op=MPI.MAX)",
+             'wall = comm.allreduce(time.perf_counter() - start - totals["retry_wall_s"], '
+             "op=MPI.MAX)",
+             ("tests/test_contact_cost.py::test_discarded_try_is_in_the_wall_time",),
+             "the contact bench's step wall time leaves out fem_anim's discarded tries"),
 ]
 
 
