@@ -93,11 +93,9 @@ def _fem_anim_steps(sim, steps: int, keep_frames: bool):
     """fem_anim's steps as ``fem-anim run`` takes them; per step a CSV row (and, with
     ``keep_frames``, the vertex displacements at rest and after each step and the initial
     vertex velocities, which the baseline starts from)."""
-    from mpi4py import MPI
-
     from fem_anim.simulation.adaptive import AdaptiveStepper
 
-    comm, ipc, dt = sim.comm, sim.problem.ipc, sim.scene["time"]["dt"]
+    ipc, dt = sim.problem.ipc, sim.scene["time"]["dt"]
     split = dict.fromkeys(ipc.timers, 0.0)
     reset = sim._contact_stats
 
@@ -107,7 +105,18 @@ def _fem_anim_steps(sim, steps: int, keep_frames: bool):
         return reset(row)
 
     sim._contact_stats = counted
-    stepper = AdaptiveStepper(sim, dt, sim.scene["time"])
+    try:
+        return _steps(sim, AdaptiveStepper(sim, dt, sim.scene["time"]), split, steps,
+                      keep_frames)
+    finally:
+        sim._contact_stats = reset
+
+
+def _steps(sim, stepper, split: dict, steps: int, keep_frames: bool):
+    """:func:`_fem_anim_steps`'s loop; ``split`` gathers ipctk's time of every try."""
+    from mpi4py import MPI
+
+    comm, ipc, dt = sim.comm, sim.problem.ipc, sim.scene["time"]["dt"]
     state = sim.initial_state()
     rows, shots = [], [sim.gather.gather(state.u)] if keep_frames else []
     velocity = sim.gather.gather(state.v) if keep_frames else None
@@ -132,7 +141,6 @@ def _fem_anim_steps(sim, steps: int, keep_frames: bool):
                      "linear_solve_s": totals["linear_solve_s"]})
         if keep_frames:
             shots.append(sim.gather.gather(state.u))
-    sim._contact_stats = reset
     return rows, shots, velocity
 
 
@@ -242,7 +250,11 @@ def main(argv: list[str] | None = None) -> int:
                         "--element-size", str(args.element_size), "--steps", str(args.steps),
                         "--out", str(out)]
         return subprocess.run(cmd).returncode
-    _measure(args.element_size, args.steps, out, args.baseline)
+    try:
+        _measure(args.element_size, args.steps, out, args.baseline)
+    except FemAnimError as err:  # e.g. a step failing at time.min_dt
+        print(f"fem-anim: error: {err}", file=sys.stderr)
+        return 2
     return 0
 
 
