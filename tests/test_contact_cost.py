@@ -75,9 +75,13 @@ def test_printed_numbers_recompute_from_the_csvs(bench):
     bl_s = sum(float(r["wall_s"]) for r in bl) / STEPS
     fa_its = sum(int(r["newton_its"]) for r in fa) / STEPS
     bl_its = sum(int(r["newton_its"]) for r in bl) / STEPS
-    assert f"| fem_anim | {fa_s:.3f} | {fa_its:.1f} |" in table
-    assert f"| ipctk + scipy baseline | {bl_s:.3f} | {bl_its:.1f} |" in table
+    fa_cpu = sum(float(r["cpu_s"]) for r in fa) / STEPS
+    bl_cpu = sum(float(r["cpu_s"]) for r in bl) / STEPS
+    assert f"| fem_anim | {fa_s:.3f} | {fa_cpu:.3f} | {fa_its:.1f} |" in table
+    assert f"| ipctk + scipy baseline | {bl_s:.3f} | {bl_cpu:.3f} | {bl_its:.1f} |" in table
     assert f"to the baseline's: {fa_s / bl_s:.2f} (" in table
+    assert f"by CPU time {fa_cpu / bl_cpu:.2f});" in table
+    assert all(float(r["cpu_s"]) > 0.0 for r in fa + bl)
     unconverged = sum(1 - int(r["converged"]) for r in bl)
     assert f"in {MAX_NEWTON} iterations: {unconverged};" in table
     heights = _rows(out / "contact_bench_com_heights.csv")

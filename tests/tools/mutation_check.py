@@ -1479,6 +1479,11 @@ MUTATIONS: list[Mutation] = [
              "op=MPI.MAX)",
              ("tests/test_contact_cost.py::test_discarded_try_is_in_the_wall_time",),
              "the contact bench's step wall time leaves out fem_anim's discarded tries"),
+    Mutation("contact-cost-cpu-ratio-of-wall", "fem_anim/bench/contact_cost.py",
+             'cpu_ratio = fa["cpu_per_step"] / bl["cpu_per_step"]',
+             'cpu_ratio = fa["s_per_step"] / bl["cpu_per_step"]',
+             ("tests/test_contact_cost.py::test_printed_numbers_recompute_from_the_csvs",),
+             "the CPU-time ratio divides fem_anim's wall time by the baseline's CPU time"),
 ]
 
 
