@@ -117,3 +117,183 @@ def test_energy_gradient_hessian_equal_the_reference():
     assert np.abs(H - H_ref).max() <= 1e-10 * np.abs(H_ref).max()
     # the bending part is there and is not negligible
     assert reference.kl_energy(*args[:6], 0.0, NU, x) < 0.5 * E_ref
+
+
+def cantilever_tip(n: int, triangulation: str = "right", nu: float = 0.0) -> float:
+    """Tip deflection / Kirchhoff-Love's ``q L^4 / (8 D)`` of a plate (L = 1, width 1/4)
+    clamped at x = 0 (its displacement held, its slope by :meth:`ShellEnergy.clamp_energy`)
+    under its own weight, ``n`` squares along its length, free sides. E is large enough for
+    the deflection to be small (1.5e-4 L: the geometric nonlinearity is below 1e-7).
+    Newton on membrane + bending + gravity from the rest state."""
+    L, W, t, E_mod, rho, g = 1.0, 0.25, 0.01, 1e12, 1000.0, 9.81
+    points, cells = structured_sheet([L, W], [n, max(1, round(W * n / L))], None,
+                                     triangulation)
+    mesh = compat.create_mesh(MPI.COMM_SELF, cells, points, 3, "triangle")
+    V = compat.vector_space(mesh, 2)
+    u = fem.Function(V)
+    mu, lmbda = lame_parameters(E_mod, nu)
+    D_plate = flexural_rigidity(E_mod, nu, t)
+    dx, dS = shell_measures(mesh, 2)
+    ds = clamp_measure(mesh, lambda y: np.isclose(y[0], 0.0))
+    shell = ShellEnergy("stvk", mu, lmbda, t, fem.Constant(mesh, PETSc.ScalarType(D_plate)),
+                        "kirchhoff_love", fem.Constant(mesh, PETSc.ScalarType(nu)))
+    gravity = fem.Constant(mesh, np.array([0.0, 0.0, -g]))
+    energy = shell.energy(u, dx, dS) + shell.clamp_energy(u, ds) \
+        - rho * t * ufl.inner(gravity, u) * dx
+    residual = fem.form(ufl.derivative(energy, u))
+    tangent = fem.form(ufl.derivative(ufl.derivative(energy, u), u))
+    clamped = fem.locate_dofs_geometrical(V, lambda y: np.isclose(y[0], 0.0))
+    bc = fem.dirichletbc(np.zeros(3), clamped, V)
+    clamped_dofs = (clamped[:, None] * 3 + np.arange(3)).ravel()
+    du = fem.Function(V)
+    ksp = PETSc.KSP().create(MPI.COMM_SELF)
+    ksp.setType("preonly")
+    ksp.getPC().setType("lu")
+    for _ in range(10):
+        A = fem_petsc.assemble_matrix(tangent, bcs=[bc])
+        A.assemble()
+        b = fem_petsc.assemble_vector(residual)
+        b.array[clamped_dofs] = 0.0  # the clamp holds u = 0: no residual there
+        b.scale(-1.0)
+        ksp.setOperators(A)
+        ksp.solve(b, compat.petsc_vec(du))
+        u.x.array[:] += du.x.array
+        if np.abs(du.x.array).max() < 1e-12 * np.abs(u.x.array).max():
+            break
+    else:
+        raise AssertionError("Newton did not converge")
+    tip = np.isclose(V.tabulate_dof_coordinates()[:, 0], L)
+    w_kl = rho * t * g * L**4 / (8 * D_plate)
+    return -u.x.array.reshape(-1, 3)[tip, 2].mean() / w_kl
+
+
+def fitted(w1, w2, w3):
+    """Order and Richardson limit of three results at h, h/2, h/4."""
+    order = np.log2((w1 - w2) / (w2 - w3))
+    return order, w3 + (w3 - w2) / (2**order - 1)
+
+
+@pytest.mark.parametrize("triangulation", ["right", "alternate"])
+def test_cantilever_plate_converges_to_kirchhoff_love(triangulation):
+    """nu = 0 (the exact plate is the beam's cylinder, w = q L^4 / (8 D)): the tip deflection
+    from n = 4, 8, 16 converges at order about 2 to Kirchhoff-Love's, within 1e-3 (the hinge:
+    order 1 to 1.21 w_KL on the right triangles; tests/test_shell.py)."""
+    w = [cantilever_tip(n, triangulation) for n in (4, 8, 16)]
+    order, limit = fitted(*w)
+    assert 1.5 < order < 2.5
+    assert abs(limit - 1) < 1e-3
+    assert abs(w[2] - 1) < 2e-3
+
+
+def test_cantilever_plate_with_poisson_lies_in_the_anticlastic_bounds():
+    """nu = 0.3 with free sides: the exact plate lies between the cylinder (1) and the
+    plane-strain strip (1 / (1 - nu^2) = 1.099); the fitted limit does too."""
+    order, limit = fitted(*(cantilever_tip(n, "right", 0.3) for n in (4, 8, 16)))
+    assert 1.0 < limit < 1 / (1 - 0.3**2)
+
+
+@pytest.mark.slow
+def test_cantilever_plate_converges_to_kirchhoff_love_finely():
+    """n = 8, 16, 32 on both triangulations: order within 0.2 of 2, limit within 2e-4."""
+    for triangulation in ("right", "alternate"):
+        order, limit = fitted(*(cantilever_tip(n, triangulation) for n in (8, 16, 32)))
+        assert abs(order - 2) < 0.2
+        assert abs(limit - 1) < 2e-4
+
+
+# -- the Kirchhoff-Love sheet as a scene ---------------------------------------------------
+
+KL_SHEET = """
+name = "kl_sheet"
+[mesh]
+shape = "sheet"
+size = [0.4, 0.2]
+origin = [0.0, 0.0, 0.0]
+element_size = 0.1
+[element]
+degree = 2
+[shell]
+thickness = 0.002
+bending_model = "kirchhoff_love"
+[material]
+model = "stvk"
+youngs_modulus = 1.0e6
+poisson_ratio = 0.3
+density = 500.0
+[time]
+dt = 0.02
+steps = 12
+[gravity]
+acceleration = [0.0, 0.0, -9.81]
+[[pin]]
+min = [-0.01, -0.01, -0.01]
+max = [0.01, 0.21, 0.01]
+[output]
+render = false
+"""
+
+
+def test_kirchhoff_love_sheet_scene_runs(tmp_path):
+    """``fem-anim run`` of a P2 sheet with Kirchhoff-Love bending, pinned along x = 0
+    (positions held: a simply supported edge) under gravity with Newmark: it swings down
+    (0.24 s), keeps its energy to 3 % of the exchanged energy, and the per-cell energy
+    density written is the sum of the cells' energies in the stats."""
+    import json
+
+    import meshio
+    from test_shell import _run
+
+    code, err = _run(tmp_path, "kl", KL_SHEET)
+    assert code == 0, err
+    summary = json.loads((tmp_path / "kl" / "summary.json").read_text())
+    assert summary["energy"]["exchanged_energy"] > 1e-3
+    assert abs(summary["energy"]["drift"]) < 0.03
+    final = meshio.read(tmp_path / "kl" / "final.vtu")
+    z = final.points[:, 2] + final.point_data["displacement"][:, 2]
+    assert z.min() < -0.05  # the free edge swung down
+
+
+@pytest.mark.mpi
+def test_kirchhoff_love_two_ranks_equal_serial(tmp_path):
+    """The Kirchhoff-Love sheet on 2 ranks: stats energies and final displacement equal
+    the serial run's to 1e-8 (edge terms between the ranks' cells included)."""
+    import meshio
+
+    from conftest import run_on_one_and_more_ranks
+    from test_cli import read_stats
+
+    scene = tmp_path / "kl.toml"
+    scene.write_text(KL_SHEET.replace("steps = 12", "steps = 4"))
+    outs = run_on_one_and_more_ranks(scene, tmp_path)
+    a, b = read_stats(outs[1] / "stats.csv"), read_stats(outs[2] / "stats.csv")
+    assert len(a) == len(b) == 4
+    for ra, rb in zip(a, b):
+        for key in ("kinetic", "elastic", "gravity"):
+            assert rb[key] == pytest.approx(ra[key], rel=1e-8, abs=1e-14), (ra["step"], key)
+    ua = meshio.read(outs[1] / "final.vtu")
+    ub = meshio.read(outs[2] / "final.vtu")
+    du = ub.point_data["displacement"] - ua.point_data["displacement"]
+    assert np.linalg.norm(du) <= 1e-8 * np.linalg.norm(ua.point_data["displacement"])
+    assert np.linalg.norm(ua.point_data["displacement"]) > 1e-3
+
+
+BAD_KL = {
+    "P1": ("degree = 2", "degree = 1", "needs element.degree = 2"),
+    "contact": ("[output]", "[contact]\n[output]", "needs P1"),
+    "obstacle": ("[output]", "[[obstacle]]\ntype = \"plane\"\nnormal = [0.0, 0.0, 1.0]\n"
+                 "point = [0.0, 0.0, -1.0]\n[output]", "needs P1"),
+    "model": ("\"kirchhoff_love\"", "\"koiter\"", "shell.bending_model"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_KL))
+def test_bad_kirchhoff_love_input_is_one_line_exit_2(case, tmp_path):
+    """P1 with Kirchhoff-Love, contact or obstacles with it, an unknown bending model: one
+    ``fem-anim: error:`` line naming it, exit code 2."""
+    from test_shell import _run
+
+    old, new, words = BAD_KL[case]
+    code, err = _run(tmp_path, "bad", KL_SHEET.replace(old, new, 1))
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("fem-anim: error: "), err
+    assert words in err[0], err[0]
