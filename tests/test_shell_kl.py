@@ -297,3 +297,47 @@ def test_bad_kirchhoff_love_input_is_one_line_exit_2(case, tmp_path):
     assert code == 2
     assert len(err) == 1 and err[0].startswith("fem-anim: error: "), err
     assert words in err[0], err[0]
+
+
+def _assembly_seconds(n: int, bending_model: str, repeats: int = 5) -> tuple[int, float]:
+    """(dofs, seconds per residual + tangent assembly) of the n x n/4 plate of
+    :func:`cantilever_tip` bent by a smooth displacement, with the hinge (P1) or
+    Kirchhoff-Love (P2)."""
+    import time
+
+    from fem_anim.forms.shell_bending import hinge_stiffness
+
+    kl = bending_model == "kirchhoff_love"
+    points, cells = structured_sheet([1.0, 0.25], [n, max(1, n // 4)], None, "right")
+    mesh = compat.create_mesh(MPI.COMM_SELF, cells, points, 3, "triangle")
+    V = compat.vector_space(mesh, 2 if kl else 1)
+    u = fem.Function(V)
+    u.interpolate(lambda y: np.vstack([0 * y[0], 0 * y[0], 0.01 * y[0] ** 2 + 0.003 * y[1]]))
+    mu, lmbda = lame_parameters(1e10, 0.3)
+    k = flexural_rigidity(1e10, 0.3, 0.01) if kl else hinge_stiffness(1e10, 0.3, 0.01)
+    shell = ShellEnergy("stvk", mu, lmbda, 0.01, fem.Constant(mesh, PETSc.ScalarType(k)),
+                        bending_model, fem.Constant(mesh, PETSc.ScalarType(0.3)))
+    dx, dS = shell_measures(mesh, 2 if kl else 1)
+    energy = shell.energy(u, dx, dS)
+    residual = fem.form(ufl.derivative(energy, u))
+    tangent = fem.form(ufl.derivative(ufl.derivative(energy, u), u))
+    fem_petsc.assemble_matrix(tangent).assemble()  # warm up
+    start = time.perf_counter()
+    for _ in range(repeats):
+        A = fem_petsc.assemble_matrix(tangent)
+        A.assemble()
+        fem_petsc.assemble_vector(residual)
+    return V.dofmap.index_map.size_local * 3, (time.perf_counter() - start) / repeats
+
+
+if __name__ == "__main__":  # the tables of docs/cloth.md, "Kirchhoff-Love bending"
+    for triangulation, nu in (("right", 0.0), ("alternate", 0.0), ("right", 0.3)):
+        w = [cantilever_tip(n, triangulation, nu) for n in (4, 8, 16, 32)]
+        print(triangulation, f"nu = {nu}:", " ".join(f"{v:.6f}" for v in w),
+              "fitted (4, 8, 16): order %.2f limit %.6f" % fitted(*w[:3]),
+              "(8, 16, 32): order %.2f limit %.6f" % fitted(*w[1:]))
+    for n in (16, 32, 64):
+        p1 = _assembly_seconds(n, "hinge")
+        p2 = _assembly_seconds(n, "kirchhoff_love")
+        print(f"n = {n}: hinge P1 {p1[0]} dofs {p1[1] * 1e3:.2f} ms, Kirchhoff-Love P2 "
+              f"{p2[0]} dofs {p2[1] * 1e3:.2f} ms (ratio {p2[1] / p1[1]:.1f})")
