@@ -121,7 +121,8 @@ def edge_density(u: Expr, J: Expr, conormal: Expr, D: Expr | float, nu: Expr | f
     H = ufl.grad(ufl.grad(u))
     B_p = curvature_change(H("+"), n_p)
     B_m = sign * curvature_change(H("-"), n_m)
-    M = (normal_moment(B_p, conormal("+"), D, nu) + normal_moment(B_m, conormal("-"), D, nu)) / 2
+    M_p = normal_moment(B_p, conormal("+"), D, nu)
+    M = (M_p + normal_moment(B_m, conormal("-"), D, nu)) / 2
     return -M * Theta + alpha * D / (2 * height) * Theta**2
 
 
