@@ -1504,6 +1504,14 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_kl.py::test_bad_kirchhoff_love_input_is_one_line_exit_2"
               "[P1]",),
              "the Kirchhoff-Love bending is accepted on P1, where grad grad u is zero"),
+    Mutation("kl-rest-normal-in-cells", "fem_anim/problem/shell_terms.py",
+             "            n = shell_bending.unit_normal(shell_membrane.tangent_map(u, J))\n"
+             "            B = shell_kirchhoff_love",
+             "            n = shell_bending.unit_normal(J)\n"
+             "            B = shell_kirchhoff_love",
+             ("tests/test_shell_kl.py::test_end_moment_rolls_the_strip_to_the_analytic_radius"
+              "[right]",),
+             "the cells' curvature projects on the rest normal: right for small rotations only"),
 ]
 
 
