@@ -183,21 +183,27 @@ def _stencils(points, cells, clamped):
     clamped edge first)."""
     cells = np.asarray(cells, np.int64)
     nodes, cell_nodes = p2_nodes(points, cells)
-    mid = {}
-    for row in cell_nodes:
-        for k, (a, b) in enumerate(_EDGES):
-            mid[frozenset((row[a], row[b]))] = row[3 + k]
-    edges = [[e0, e1, mid[frozenset((e0, e1))], a, mid[frozenset((e1, a))],
-              mid[frozenset((e0, a))], b, mid[frozenset((e1, b))], mid[frozenset((e0, b))]]
-             for e0, e1, a, b in interior_hinges(cells)]
-    clamps = []
-    for e0, e1 in clamped:
-        (cell,) = [c for c in cells if e0 in c and e1 in c]
-        a = [v for v in cell if v not in (e0, e1)][0]
-        clamps.append([e0, e1, a, mid[frozenset((e1, a))], mid[frozenset((e0, a))],
-                       mid[frozenset((e0, e1))]])
-    return nodes, cell_nodes, np.array(edges, np.int64).reshape(-1, 9), \
-        np.array(clamps, np.int64).reshape(-1, 6)
+    n = len(nodes)
+    pairs = cell_nodes[:, np.array(_EDGES)]  # (m, 3, 2) vertex pairs of the edge nodes 3..5
+    keys = np.sort(pairs, axis=2) @ np.array([n, 1])
+    order = np.argsort(keys.ravel())
+    sorted_keys, mids = keys.ravel()[order], cell_nodes[:, 3:].ravel()[order]
+
+    def mid(i, j):
+        key = np.minimum(i, j) * n + np.maximum(i, j)
+        return mids[np.searchsorted(sorted_keys, key)]
+
+    e0, e1, a, b = interior_hinges(cells).T
+    edges = np.column_stack([e0, e1, mid(e0, e1), a, mid(e1, a), mid(e0, a), b, mid(e1, b),
+                             mid(e0, b)])
+    clamped = np.asarray(clamped, np.int64).reshape(-1, 2)
+    c0, c1 = clamped.T
+    owner = ((cells[None] == c0[:, None, None]).any(2)
+             & (cells[None] == c1[:, None, None]).any(2)).argmax(1)
+    rest = cells[owner]
+    c2 = rest.sum(1) - c0 - c1  # the third vertex
+    clamps = np.column_stack([c0, c1, c2, mid(c1, c2), mid(c0, c2), mid(c0, c1)])
+    return nodes, cell_nodes, edges.reshape(-1, 9), clamps.reshape(-1, 6)
 
 
 def _terms(points, cells, model, mu, lmbda, thickness, D, nu, clamped, alpha, cell_rule,
