@@ -80,6 +80,30 @@ def test_reference_rules_are_the_compiled_ones():
         assert np.allclose(np.asarray(weights)[key], ref_w[rkey], atol=1e-14)
 
 
+def test_surface_hessian_of_a_quadratic_field(tmp_path):
+    """``grad(grad(u))`` on a folded surface in 3D, compiled afresh (an empty JIT cache: on
+    DOLFINx 0.5 this exercises ``compat``'s fix of FFCx 0.5's derivative tables), equals the
+    tangential projection P H P of the field's 3D Hessian on each flat triangle (P2 holds a
+    quadratic exactly)."""
+    points, cells = structured_sheet([1.0, 1.0], [3, 3], triangulation="alternate")
+    points[:, 2] = 0.2 * points[:, 0] ** 2  # a fold line per column of cells
+    mesh = compat.create_mesh(MPI.COMM_SELF, cells, points, 3, "triangle")
+    V = compat.vector_space(mesh, 2)
+    u = fem.Function(V)
+    u.interpolate(lambda y: np.vstack([0.1 * y[1] ** 2, 0.05 * y[0] * y[1],
+                                       0.3 * y[0] ** 2 + 0.1 * y[1]]))
+    H = ufl.grad(ufl.grad(u[2]))
+    form = ufl.inner(H, H) * ufl.dx(domain=mesh, metadata={"quadrature_degree": 2})
+    compiled = compat.compile_forms_together({"h": form}, {"cache_dir": str(tmp_path)})["h"]
+    expected = 0.0
+    for tri in points[cells]:
+        N = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+        area = np.linalg.norm(N) / 2
+        P = np.eye(3) - np.outer(N, N) / np.dot(N, N)
+        expected += area * np.sum((P @ np.diag([0.6, 0.0, 0.0]) @ P) ** 2)
+    assert fem.assemble_scalar(compiled) == pytest.approx(expected, rel=1e-12)
+
+
 def test_energy_gradient_hessian_equal_the_reference():
     """Membrane + Kirchhoff-Love bending (cells, interior edges, a clamped edge): energy,
     gradient and Hessian = the hyper-dual reference to 1e-10, on a rest surface that is not
