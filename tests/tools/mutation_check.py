@@ -1516,7 +1516,7 @@ def verify_isolation(scratch: Path) -> None:
 def run_selection(scratch: Path, tests: tuple[str, ...], timeout: float) -> tuple[int, float, str]:
     """pytest on ``tests`` in the copy: (exit code, seconds, last lines of its output)."""
     start = time.perf_counter()
-    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-n", "0",
            "-m", "not slow or slow", *tests]
     try:
         out = subprocess.run(cmd, cwd=scratch, env=environment(scratch), capture_output=True,
