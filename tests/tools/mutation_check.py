@@ -1458,6 +1458,16 @@ MUTATIONS: list[Mutation] = [
              '        if observed and self.storage == "revolve" and n not in self._stored:',
              ("tests/test_adjoint_storage.py::test_revolve_keeps_the_objective_states_only",),
              "a checkpoint the objective reads is not kept after the sweep drops it"),
+    Mutation("suite-selection-spawns-workers", "tests/conftest.py",
+             "    if config.args_source == pytest.Config.ArgsSource.ARGS:\n        return 0\n",
+             "",
+             ("tests/test_suite_workers.py::test_a_selection_runs_in_this_process",),
+             "a run of one file starts worker processes (each imports DOLFINx) for nothing"),
+    Mutation("docs-warnings-not-errors", "tests/test_docs.py",
+             '[sys.executable, "-m", "sphinx", "-W", "--keep-going",',
+             '[sys.executable, "-m", "sphinx", "--keep-going",',
+             ("tests/test_docs.py::test_a_broken_cross_reference_fails_the_build",),
+             "the site's build passes with a broken cross-reference (warnings not errors)"),
 ]
 
 
