@@ -1512,6 +1512,16 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_kl.py::test_end_moment_rolls_the_strip_to_the_analytic_radius"
               "[right]",),
              "the cells' curvature projects on the rest normal: right for small rotations only"),
+    Mutation("suite-selection-spawns-workers", "tests/conftest.py",
+             "    if config.args_source == pytest.Config.ArgsSource.ARGS:\n        return 0\n",
+             "",
+             ("tests/test_suite_workers.py::test_a_selection_runs_in_this_process",),
+             "a run of one file starts worker processes (each imports DOLFINx) for nothing"),
+    Mutation("docs-warnings-not-errors", "tests/test_docs.py",
+             '[sys.executable, "-m", "sphinx", "-W", "--keep-going",',
+             '[sys.executable, "-m", "sphinx", "--keep-going",',
+             ("tests/test_docs.py::test_a_broken_cross_reference_fails_the_build",),
+             "the site's build passes with a broken cross-reference (warnings not errors)"),
 ]
 
 
@@ -1570,7 +1580,7 @@ def verify_isolation(scratch: Path) -> None:
 def run_selection(scratch: Path, tests: tuple[str, ...], timeout: float) -> tuple[int, float, str]:
     """pytest on ``tests`` in the copy: (exit code, seconds, last lines of its output)."""
     start = time.perf_counter()
-    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-n", "0",
            "-m", "not slow or slow", *tests]
     try:
         out = subprocess.run(cmd, cwd=scratch, env=environment(scratch), capture_output=True,
