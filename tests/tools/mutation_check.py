@@ -1458,6 +1458,70 @@ MUTATIONS: list[Mutation] = [
              '        if observed and self.storage == "revolve" and n not in self._stored:',
              ("tests/test_adjoint_storage.py::test_revolve_keeps_the_objective_states_only",),
              "a checkpoint the objective reads is not kept after the sweep drops it"),
+    Mutation("kl-consistency-sign", "forms/shell_kirchhoff_love.py",
+             "conormal(\"-\"), D, nu)) / 2\n    return -M * Theta",
+             "conormal(\"-\"), D, nu)) / 2\n    return M * Theta",
+             ("tests/test_shell_kl.py::test_cantilever_plate_converges_to_kirchhoff_love"
+              "[right]",),
+             "the interior edges' Nitsche consistency term has the wrong sign: not the plate's "
+             "Euler-Lagrange equations"),
+    Mutation("kl-edge-direction", "forms/shell_kirchhoff_love.py",
+             "    edge = ufl.cross(N_p, conormal(\"+\"))",
+             "    edge = ufl.cross(conormal(\"+\"), N_p)",
+             ("tests/test_shell_kl.py::test_cantilever_plate_converges_to_kirchhoff_love"
+              "[right]",),
+             "the kink angle is measured about the reversed edge: Theta has the opposite sign "
+             "of the slope jump, against the moments"),
+    Mutation("kl-minus-side-orientation", "forms/shell_kirchhoff_love.py",
+             "    B_m = sign * curvature_change(H(\"-\"), n_m)",
+             "    B_m = curvature_change(H(\"-\"), n_m)",
+             ("tests/test_shell_kl.py::test_energy_gradient_hessian_equal_the_reference",),
+             "the '-' side's moment keeps the mesh's orientation of its triangle, not the '+' "
+             "side's"),
+    Mutation("kl-clamp-moment", "forms/shell_kirchhoff_love.py",
+             "    M = normal_moment(curvature_change(ufl.grad(ufl.grad(u)), n), conormal",
+             "    M = 0.5 * normal_moment(curvature_change(ufl.grad(ufl.grad(u)), n), conormal",
+             ("tests/test_shell_kl.py::test_energy_gradient_hessian_equal_the_reference",),
+             "the clamp averages its one moment with a zero one, as an interior edge would"),
+    Mutation("kl-poisson-term", "forms/shell_kirchhoff_love.py",
+             "    return D / 2 * ((1 - nu) * ufl.inner(B, B) + nu * ufl.tr(B) ** 2)",
+             "    return D / 2 * ((1 - nu) * ufl.inner(B, B) + nu * ufl.tr(B))",
+             ("tests/test_shell_kl.py::test_energy_gradient_hessian_equal_the_reference",),
+             "Koiter's density without the square of the trace"),
+    Mutation("kl-ffcx-tdim-counts", "fem_anim/compat.py",
+             "            result = result._replace(local_derivatives=counts[:tdim])",
+             "            pass",
+             ("tests/test_shell_kl.py::test_surface_hessian_of_a_quadratic_field",),
+             "FFCx 0.5's tables of second derivatives on a surface are left unfixed"),
+    Mutation("kl-p2-quadrature", "fem_anim/problem/shell_terms.py",
+             "    metadata = {\"quadrature_degree\": 0 if degree == 1 else 2}",
+             "    metadata = {\"quadrature_degree\": 0 if degree == 1 else 1}",
+             ("tests/test_shell_kl.py::test_energy_gradient_hessian_equal_the_reference",),
+             "a P2 shell's cells and edges integrated with one point each"),
+    Mutation("kl-p1-allowed", "fem_anim/scene/shell_rules.py",
+             "    if element[\"degree\"] != (2 if kl else 1):",
+             "    if element[\"degree\"] not in ((1, 2) if kl else (1,)):",
+             ("tests/test_shell_kl.py::test_bad_kirchhoff_love_input_is_one_line_exit_2"
+              "[P1]",),
+             "the Kirchhoff-Love bending is accepted on P1, where grad grad u is zero"),
+    Mutation("kl-rest-normal-in-cells", "fem_anim/problem/shell_terms.py",
+             "            n = shell_bending.unit_normal(shell_membrane.tangent_map(u, J))\n"
+             "            B = shell_kirchhoff_love",
+             "            n = shell_bending.unit_normal(J)\n"
+             "            B = shell_kirchhoff_love",
+             ("tests/test_shell_kl.py::test_end_moment_rolls_the_strip_to_the_analytic_radius"
+              "[right]",),
+             "the cells' curvature projects on the rest normal: right for small rotations only"),
+    Mutation("suite-selection-spawns-workers", "tests/conftest.py",
+             "    if config.args_source == pytest.Config.ArgsSource.ARGS:\n        return 0\n",
+             "",
+             ("tests/test_suite_workers.py::test_a_selection_runs_in_this_process",),
+             "a run of one file starts worker processes (each imports DOLFINx) for nothing"),
+    Mutation("docs-warnings-not-errors", "tests/test_docs.py",
+             '[sys.executable, "-m", "sphinx", "-W", "--keep-going",',
+             '[sys.executable, "-m", "sphinx", "--keep-going",',
+             ("tests/test_docs.py::test_a_broken_cross_reference_fails_the_build",),
+             "the site's build passes with a broken cross-reference (warnings not errors)"),
     Mutation("contact-cost-setup-in-first-step", "fem_anim/bench/contact_cost.py",
              "split[key] = ipc.timers[key] = 0.0",
              "split[key] = 0.0",
@@ -1542,7 +1606,7 @@ def verify_isolation(scratch: Path) -> None:
 def run_selection(scratch: Path, tests: tuple[str, ...], timeout: float) -> tuple[int, float, str]:
     """pytest on ``tests`` in the copy: (exit code, seconds, last lines of its output)."""
     start = time.perf_counter()
-    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-n", "0",
            "-m", "not slow or slow", *tests]
     try:
         out = subprocess.run(cmd, cwd=scratch, env=environment(scratch), capture_output=True,
