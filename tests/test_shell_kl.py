@@ -24,6 +24,7 @@ from fem_anim.forms.shell_bending import flexural_rigidity
 from fem_anim.meshes.sheet import structured_sheet
 from fem_anim.problem.shell_terms import ShellEnergy, shell_measures
 from fem_anim.reference import shell_kl_energy as reference
+from test_shell import clamped_newton
 
 MU, LMBDA, THICKNESS, D, NU = 3.0, 2.0, 0.1, 0.7, 0.3
 
@@ -180,28 +181,7 @@ def cantilever_tip(n: int, triangulation: str = "right", nu: float = 0.0) -> flo
     gravity = fem.Constant(mesh, np.array([0.0, 0.0, -g]))
     energy = shell.energy(u, dx, dS) + shell.clamp_energy(u, ds) \
         - rho * t * ufl.inner(gravity, u) * dx
-    residual = fem.form(ufl.derivative(energy, u))
-    tangent = fem.form(ufl.derivative(ufl.derivative(energy, u), u))
-    clamped = fem.locate_dofs_geometrical(V, lambda y: np.isclose(y[0], 0.0))
-    bc = fem.dirichletbc(np.zeros(3), clamped, V)
-    clamped_dofs = (clamped[:, None] * 3 + np.arange(3)).ravel()
-    du = fem.Function(V)
-    ksp = PETSc.KSP().create(MPI.COMM_SELF)
-    ksp.setType("preonly")
-    ksp.getPC().setType("lu")
-    for _ in range(10):
-        A = fem_petsc.assemble_matrix(tangent, bcs=[bc])
-        A.assemble()
-        b = fem_petsc.assemble_vector(residual)
-        b.array[clamped_dofs] = 0.0  # the clamp holds u = 0: no residual there
-        b.scale(-1.0)
-        ksp.setOperators(A)
-        ksp.solve(b, compat.petsc_vec(du))
-        u.x.array[:] += du.x.array
-        if np.abs(du.x.array).max() < 1e-12 * np.abs(u.x.array).max():
-            break
-    else:
-        raise AssertionError("Newton did not converge")
+    clamped_newton(energy, u, lambda y: np.isclose(y[0], 0.0))(10, 1e-12)
     tip = np.isclose(V.tabulate_dof_coordinates()[:, 0], L)
     w_kl = rho * t * g * L**4 / (8 * D_plate)
     return -u.x.array.reshape(-1, 3)[tip, 2].mean() / w_kl
@@ -284,31 +264,11 @@ def rolled_strip(n: int, triangulation: str = "right", turn: float = 2.0, steps:
     a = a / ufl.sqrt(ufl.dot(a, a))
     phi = 2 * ufl.atan(a[2] / (1 + a[0]))
     energy = shell.energy(u, dx, dS) + shell.clamp_energy(u, ds(1)) - m * phi * ds(2)
-    residual = fem.form(ufl.derivative(energy, u))
-    tangent = fem.form(ufl.derivative(ufl.derivative(energy, u), u))
-    clamped = fem.locate_dofs_geometrical(V, lambda y: np.isclose(y[0], 0.0))
-    bc = fem.dirichletbc(np.zeros(3), clamped, V)
-    clamped_dofs = (clamped[:, None] * 3 + np.arange(3)).ravel()
-    du = fem.Function(V)
-    ksp = PETSc.KSP().create(MPI.COMM_SELF)
-    ksp.setType("preonly")
-    ksp.getPC().setType("lu")
+    solve = clamped_newton(energy, u, lambda y: np.isclose(y[0], 0.0))
     m_final = turn * D_strip / L
     for k in range(1, steps + 1):
         m.value = m_final * k / steps
-        for _ in range(30):
-            A = fem_petsc.assemble_matrix(tangent, bcs=[bc])
-            A.assemble()
-            b = fem_petsc.assemble_vector(residual)
-            b.array[clamped_dofs] = 0.0
-            b.scale(-1.0)
-            ksp.setOperators(A)
-            ksp.solve(b, compat.petsc_vec(du))
-            u.x.array[:] += du.x.array
-            if np.abs(du.x.array).max() < 1e-10 * np.abs(u.x.array).max():
-                break
-        else:
-            raise AssertionError(f"Newton did not converge at load step {k}")
+        solve(30, 1e-10)
     x = V.tabulate_dof_coordinates() + u.x.array.reshape(-1, 3)
     c = np.linalg.lstsq(np.column_stack([x[:, 0], x[:, 2], np.ones(len(x))]),
                         -(x[:, 0] ** 2 + x[:, 2] ** 2), rcond=None)[0]
