@@ -32,6 +32,9 @@ between them is wrapped here, in the package and in the tests alike
     ``set_bc(scale=)``, ``apply_lifting(...)``  ``alpha=`` (fem_anim passes them by position)
     ``create_mesh``: shared-facet ghosts         no ghosts by default (a ``partitioner`` of
                                                 ``GhostMode.shared_facet`` for ``dS``)
+    FFCx tables of ``grad(grad(u))`` on a        right (FFCx 0.5 counts the reference derivatives
+    surface in 3D: wrong index, IndexError      over gdim, not tdim: fixed here on import,
+                                                :func:`_fix_manifold_derivative_tables`)
     ==========================================  ==================================================
 
 Each function below branches on :data:`LEGACY` (0.5) against the current API (0.9). A newer
@@ -72,6 +75,45 @@ if DOLFINX_VERSION not in SUPPORTED:
                       f"this is DOLFINx {dolfinx.__version__}")
 #: True on DOLFINx 0.5 (Debian 12), False on 0.9 (Debian 13).
 LEGACY: bool = DOLFINX_VERSION < (0, 9)
+
+
+def _fix_manifold_derivative_tables() -> None:
+    """Make FFCx 0.5 tabulate second reference derivatives on a manifold (idempotent).
+
+    FFCx 0.5's ``ffcx/ir/elementtables.py`` (``get_modified_terminal_element``, line 224)
+    turns a terminal's reference derivative directions into counts over the *geometric*
+    dimension, and looks the counts up in basix's table of the *topological* one: on a
+    triangle in 3D ``d^2/dxi_1^2`` becomes ``(0, 2, 0)``, basix index 7 of a table of 6
+    ("IndexError: index 7 is out of bounds for axis 0 with size 6"); first derivatives
+    happen to land on the right index. FFCx 0.9 counts over ``tdim`` (its line 250). The
+    counts past ``tdim`` are zero (reference directions are ``< tdim``), so dropping them
+    is exactly 0.9's rule; forms without second derivatives on a manifold get the same
+    tables, hence the same code, as before. A shell's Kirchhoff-Love bending
+    (:mod:`fem_anim.forms.shell_kirchhoff_love`) needs it.
+    """
+    import ffcx.ir.elementtables as tables
+
+    if getattr(tables, "_fem_anim_tdim_counts", False):
+        return
+    original = tables.get_modified_terminal_element
+
+    def get_modified_terminal_element(mt):
+        result = original(mt)
+        if result is None:
+            return result
+        tdim = mt.terminal.ufl_domain().topological_dimension()
+        counts = tuple(result.local_derivatives)
+        if len(counts) > tdim:
+            assert not any(counts[tdim:])
+            result = result._replace(local_derivatives=counts[:tdim])
+        return result
+
+    tables.get_modified_terminal_element = get_modified_terminal_element
+    tables._fem_anim_tdim_counts = True
+
+
+if LEGACY:
+    _fix_manifold_derivative_tables()
 
 if not LEGACY:
     import basix.ufl

@@ -11,7 +11,8 @@ perturbed-Lagrangian (u, p) energy of nearly incompressible solids, with
 :mod:`.mooney_rivlin`); :mod:`.inertia` (mass and kinetic energy, seed section 4.1),
 :mod:`.gravity`, :mod:`.damping` (Rayleigh damping as a potential),
 :mod:`.obstacle_contact` (barrier and friction of static obstacles),
-:mod:`.shell_membrane` and :mod:`.shell_bending` (a thin shell's energies on a surface),
+:mod:`.shell_membrane`, :mod:`.shell_bending` (a thin shell's energies on a surface; the
+P1 hinge) and :mod:`.shell_kirchhoff_love` (P2 Kirchhoff-Love bending, C0 interior penalty),
 :mod:`.aerodynamic_drag` (a shell's wind drag as a dissipation potential) and
 :mod:`.time_schemes` (the step objective of each integrator, seed section 3.1).
 """

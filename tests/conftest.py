@@ -1,7 +1,8 @@
 """Shared pytest set-up and helpers.
 
 After each test, garbage is collected and the MPI ranks synchronise (so a collective
-destructor never runs on one rank only); the helpers start the command line and ``mpirun``
+destructor never runs on one rank only; the heap surviving a module's start is frozen, so
+that collection is cheap); the helpers start the command line and ``mpirun``
 in subprocesses and check Newton's residual test on a run's statistics rows.
 """
 
@@ -15,6 +16,36 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+#: The most worker processes the whole suite runs on (each holds DOLFINx, and many tests
+#: start ``mpirun -n 2`` or a run of their own).
+MAX_WORKERS = 4
+
+
+def pytest_xdist_auto_num_workers(config) -> int:
+    """``-n auto`` (pyproject's addopts): the whole suite on min(CPUs, 4) workers, in this process
+    when paths or node ids were given (a selection: no workers to start), or as
+    ``PYTEST_XDIST_AUTO_NUM_WORKERS`` says."""
+    if "PYTEST_XDIST_AUTO_NUM_WORKERS" in os.environ:
+        return int(os.environ["PYTEST_XDIST_AUTO_NUM_WORKERS"])
+    if config.args_source == pytest.Config.ArgsSource.ARGS:
+        return 0
+    return min(len(os.sched_getaffinity(0)), MAX_WORKERS)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _heap_frozen_per_module():
+    """At each test module's start: a full collection, then the surviving heap frozen.
+
+    The per-test ``gc.collect()`` below then scans only what was made since (the imported
+    libraries' millions of objects made every collection cost ~20 ms); what an earlier
+    module left and later dropped is collected here, at the next module's start, at the
+    same point on every rank."""
+    gc.unfreeze()
+    gc.collect()
+    gc.freeze()
+    yield
 
 
 @pytest.fixture(autouse=True)

@@ -8,7 +8,6 @@ must be false on each.
 
 from __future__ import annotations
 
-import gc
 import json
 
 import ipctk
@@ -53,12 +52,6 @@ material = {{ youngs_modulus = 2e5, density = 800 }}
 initial = {{ velocity = [-1.0, 0, 0] }}
 """
 
-
-@pytest.fixture(autouse=True)
-def _collect():
-    yield
-    gc.collect()
-    MPI.COMM_WORLD.Barrier()
 
 
 def intersection_free(points: np.ndarray, cells: np.ndarray, frames) -> list[bool]:

@@ -11,7 +11,6 @@ library call stops the run within seconds (the watcher process of
 
 from __future__ import annotations
 
-import gc
 import os
 import signal
 import subprocess
@@ -20,7 +19,6 @@ import time
 from pathlib import Path
 
 import pytest
-from mpi4py import MPI
 
 from fem_anim.cli import main
 from fem_anim.errors import SceneError
@@ -102,12 +100,6 @@ max = [1, 1, 1]
 velocity = [VR, 0, 0]
 """
 
-
-@pytest.fixture(autouse=True)
-def _collect():
-    yield
-    gc.collect()
-    MPI.COMM_WORLD.Barrier()
 
 
 def _throw(n: int, steps: int) -> str:

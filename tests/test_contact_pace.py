@@ -5,7 +5,6 @@ and an energy line that separates the handles' work from the stored energy."""
 from __future__ import annotations
 
 import csv
-import gc
 import json
 from pathlib import Path
 
@@ -73,12 +72,6 @@ mesh = {{ shape = "box", size = [0.1, 0.1, 0.05], element_size = 0.05 }}
 material = {{ youngs_modulus = 1e5, density = 1000 }}
 """
 
-
-@pytest.fixture(autouse=True)
-def _collect():
-    yield
-    gc.collect()
-    MPI.COMM_WORLD.Barrier()
 
 
 def run(tmp_path, text: str, *overrides: str) -> tuple[list[dict], dict, str]:

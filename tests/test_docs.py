@@ -43,9 +43,17 @@ needs_sphinx = pytest.mark.skipif(
     reason="the docs extra is not installed (pip install -e '.[docs]', done by .ci/setup)")
 
 
+@pytest.fixture(scope="module")
+def built_docs(tmp_path_factory):
+    """The site built once from a copy of ``docs/``: (build folder, its docs copy, result)."""
+    tmp_path = tmp_path_factory.mktemp("site")
+    docs = _copy_docs(tmp_path)
+    return tmp_path, docs, _sphinx_build(tmp_path, docs)
+
+
 @needs_sphinx
-def test_docs_build_without_warnings(tmp_path):
-    result = _sphinx_build(tmp_path, _copy_docs(tmp_path))
+def test_docs_build_without_warnings(built_docs):
+    tmp_path, _, result = built_docs
     assert result.returncode == 0, "sphinx-build -W failed:\n" + result.stderr[-6000:]
     assert (tmp_path / "html" / "scene_reference.html").exists()
     page = (tmp_path / "html" / "scene_reference.html").read_text()
@@ -53,11 +61,16 @@ def test_docs_build_without_warnings(tmp_path):
 
 
 @needs_sphinx
-def test_a_broken_cross_reference_fails_the_build(tmp_path):
-    docs = _copy_docs(tmp_path)
+def test_a_broken_cross_reference_fails_the_build(built_docs):
+    """The built site rebuilt with one page broken (Sphinx re-reads only that page) fails."""
+    tmp_path, docs, _ = built_docs
     page = docs / "contact.md"
-    page.write_text(page.read_text() + "\nSee {doc}`no_such_page` and [this](no_such_file.md).\n")
-    result = _sphinx_build(tmp_path, docs)
+    text = page.read_text()
+    page.write_text(text + "\nSee {doc}`no_such_page` and [this](no_such_file.md).\n")
+    try:
+        result = _sphinx_build(tmp_path, docs)
+    finally:
+        page.write_text(text)
     assert result.returncode != 0
     assert "no_such_page" in result.stderr
 

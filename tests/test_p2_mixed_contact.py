@@ -18,7 +18,6 @@ Serial: the states are read on the rank's own dofs.
 
 from __future__ import annotations
 
-import gc
 from pathlib import Path
 
 import ipctk
@@ -41,11 +40,6 @@ pytestmark = pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="serial: local d
 
 H = 0.01  # s
 
-
-@pytest.fixture(autouse=True)
-def _collect():
-    yield
-    gc.collect()
 
 
 def _material(nu: float) -> dict:

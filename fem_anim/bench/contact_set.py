@@ -195,13 +195,20 @@ def _baseline(scene, domain):
                        pins)
 
 
-def _baseline_run(scene, domain, frames: int):
+def _baseline_run(scene, domain, frames: int, velocity=None):
+    """The baseline's frames from rest, or from the vertex velocities ``velocity`` (n, 3)
+    (m/s; fem_anim's initial state, for a scene with ``[body.initial]``)."""
     sim = _baseline(scene, domain)
+    if velocity is not None:
+        sim.v = np.asarray(velocity, float).ravel().copy()
     dt = scene["time"]["dt"]
     rows, shots = [], [np.zeros_like(domain.points)]
     for k in range(frames):
+        cpu = time.process_time()
         s = sim.step(dt)
+        cpu = time.process_time() - cpu
         rows.append({"frame": k + 1, "time": sim.t, "dt": dt, "wall_s": s.wall_s,
+                     "cpu_s": cpu,
                      "step_wall_s": s.wall_s, "newton_its": s.newton_its, "ipc_s": s.ipc_s,
                      "retries": 0, "pairs": s.pairs, "converged": int(s.converged)})
         shots.append(sim.x.reshape(-1, 3) - domain.points)

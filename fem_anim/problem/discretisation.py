@@ -125,7 +125,7 @@ class Discretisation:
             # the membrane's integrand is constant per cell: any rule is exact, and sharing
             # the mass measure's keeps one rule per kernel (two rules in one kernel
             # redefine the Jacobian under FFCx 0.5)
-            _, self.dS_shell = shell_measures(mesh)
+            _, self.dS_shell = shell_measures(mesh, scene["element"]["degree"])
             self.dx_shell = self.dx_mass
             self.elastic_terms = []
         #: ``[wind]``: a shell's aerodynamic drag (fem_anim.problem.wind_terms)

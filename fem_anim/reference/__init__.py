@@ -18,6 +18,8 @@ The oracle for the test suite: no UFL, no DOLFINx. It follows the seed's pipelin
 * :mod:`.shell_energy` - a P1 shell's membrane and hinge-bending energies, gradients and
   Hessians (hyper-dual numbers; imported as the module, whose name its energy function
   shares).
+* :mod:`.shell_kl_energy` - a P2 shell's membrane and Kirchhoff-Love (C0 interior-penalty)
+  bending energy, gradient and Hessian (hyper-dual numbers; imported as the module).
 """
 
 from fem_anim.reference.assembly import elastic_energy, elastic_gradient, elastic_hessian

@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["HyperDual", "interior_hinges", "shell_energy", "shell_gradient", "shell_hessian"]
+__all__ = ["HyperDual", "interior_hinges", "membrane_psi", "shell_energy", "shell_gradient",
+           "shell_hessian"]
 
 
 class HyperDual:
@@ -96,6 +97,25 @@ def _sub(p, q):
     return [pi - qi for pi, qi in zip(p, q)]
 
 
+def membrane_psi(g00, g01, g11, la, b1, h, model, mu, lmbda):
+    """The membrane density (per rest volume) of the metric ``g = D_s^T D_s`` of a tangent
+    map ``D_s`` (hyper-dual), ``D_m = [[la, b1], [0, h]]`` the rest one in its orthonormal
+    frame: ``C = D_m^{-T} g D_m^{-1}``, then StVK or neo-Hookean in plane stress."""
+    i00, i01, i11 = 1 / la, -b1 / (la * h), 1 / h  # D_m^{-1} = [[i00, i01], [0, i11]]
+    C00 = i00 * i00 * g00
+    C01 = i00 * (g00 * i01 + g01 * i11)
+    C11 = i01 * i01 * g00 + 2 * i01 * i11 * g01 + i11 * i11 * g11
+    ls = 2 * mu * lmbda / (lmbda + 2 * mu)
+    if model == "stvk":
+        E00, E01, E11 = (C00 - 1) / 2, C01 / 2, (C11 - 1) / 2
+        trE = E00 + E11
+        return mu * (E00 * E00 + 2 * E01 * E01 + E11 * E11) + ls / 2 * trE * trE
+    if model == "neohookean":
+        lnJ = (C00 * C11 - C01 * C01).log() / 2
+        return mu / 2 * (C00 + C11 - 2) - mu * lnJ + ls / 2 * lnJ * lnJ
+    raise ValueError(f"no membrane energy for model {model!r}")
+
+
 def _membrane_cell(X, x, model, mu, lmbda, thickness):
     """t A psi(F) of each cell; ``X`` real rest vertices ``(3, 3, m)``, ``x`` deformed."""
     a, b = X[1] - X[0], X[2] - X[0]
@@ -107,20 +127,7 @@ def _membrane_cell(X, x, model, mu, lmbda, thickness):
     # D_m = [[la, b1], [0, h]]; F = D_s D_m^{-1}; C = F^T F from the metric g = D_s^T D_s
     ds0, ds1 = _sub(x[1], x[0]), _sub(x[2], x[0])
     g00, g01, g11 = _dot(ds0, ds0), _dot(ds0, ds1), _dot(ds1, ds1)
-    i00, i01, i11 = 1 / la, -b1 / (la * h), 1 / h  # D_m^{-1} = [[i00, i01], [0, i11]]
-    C00 = i00 * i00 * g00
-    C01 = i00 * (g00 * i01 + g01 * i11)
-    C11 = i01 * i01 * g00 + 2 * i01 * i11 * g01 + i11 * i11 * g11
-    ls = 2 * mu * lmbda / (lmbda + 2 * mu)
-    if model == "stvk":
-        E00, E01, E11 = (C00 - 1) / 2, C01 / 2, (C11 - 1) / 2
-        trE = E00 + E11
-        psi = mu * (E00 * E00 + 2 * E01 * E01 + E11 * E11) + ls / 2 * trE * trE
-    elif model == "neohookean":
-        lnJ = (C00 * C11 - C01 * C01).log() / 2
-        psi = mu / 2 * (C00 + C11 - 2) - mu * lnJ + ls / 2 * lnJ * lnJ
-    else:
-        raise ValueError(f"no membrane energy for model {model!r}")
+    psi = membrane_psi(g00, g01, g11, la, b1, h, model, mu, lmbda)
     return psi * (thickness * area)
 
 

@@ -226,7 +226,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
                          doc="shell thickness t: energy t psi per area, area density rho t"),
         "bending": Key((int, float, str), "derived", shell_bending_value, unit="J",
                        doc="hinge stiffness k, 0 for a membrane, or \"derived\": from E, nu "
-                       "and the thickness (k = D / 6, D = E t^3 / (12 (1 - nu^2)))"),
+                       "and the thickness (k = D / 6, D = E t^3 / (12 (1 - nu^2))); with "
+                       "bending_model = \"kirchhoff_love\" the rigidity D itself"),
+        "bending_model": Key(str, "hinge", choices=("hinge", "kirchhoff_love"),
+                             doc="\"hinge\": P1 discrete-shell hinges; \"kirchhoff_love\": "
+                             "P2 C0 interior-penalty Kirchhoff-Love (needs element.degree = 2)"),
     },
     "wind": {  # aerodynamic drag on a shell (fem_anim/forms/aerodynamic_drag.py)
         "velocity": Key(list, [0.0, 0.0, 0.0], None, (3,), unit="m/s",

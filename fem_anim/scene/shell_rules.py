@@ -2,7 +2,9 @@
 
 A shell is one body whose mesh is a triangle surface in 3D (``mesh.shape = "sheet"`` or a
 surface file), P1, with a membrane model of :mod:`fem_anim.forms.shell_membrane` and the
-hinge bending of :mod:`fem_anim.forms.shell_bending`. What its energy does not have yet is
+hinge bending of :mod:`fem_anim.forms.shell_bending`, or P2 with the Kirchhoff-Love bending of
+:mod:`fem_anim.forms.shell_kirchhoff_love` (``shell.bending_model``; no contact or obstacles
+yet). What its energy does not have yet is
 refused here, one rule a line: several bodies and regions, ``[contact]`` without self
 contact (a shell scene has one body, so its only IPC pairs are the shell's own), obstacles
 with a consistent mass (the barrier's vertex rule must be the mass's), P2, the mixed
@@ -47,9 +49,18 @@ def _refuse(data: dict[str, Any]) -> str | None:
                 f"{mesh['shape']!r}")
     if mesh["shape"] == "sheet" and len(mesh["size"]) != 2:
         return f"mesh.size of a sheet must have 2 entries (x, y), got {mesh['size']}"
-    if element["degree"] != 1:
-        return (f"[shell] supports element.degree = 1 only (P1 membrane and hinge bending), "
-                f"got {element['degree']}")
+    kl = data["shell"]["bending_model"] == "kirchhoff_love"
+    if element["degree"] != (2 if kl else 1):
+        if kl:
+            return (f"shell.bending_model = \"kirchhoff_love\" needs element.degree = 2 (a "
+                    f"P2 displacement), got {element['degree']}")
+        return (f"[shell] supports element.degree = 1 only (P1 membrane and hinge bending; "
+                f"P2 with shell.bending_model = \"kirchhoff_love\"), got {element['degree']}")
+    if kl and "contact" in data:
+        return "[shell] with [contact] needs P1: shell.bending_model = \"hinge\""
+    if kl and data["obstacle"]:
+        return "[shell] with [[obstacle]] needs P1: shell.bending_model = \"hinge\""
+
     if element["formulation"] != "displacement":
         return "[shell] supports element.formulation = \"displacement\" only"
     if material["model"] not in SHELL_MODELS:
