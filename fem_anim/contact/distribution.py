@@ -12,15 +12,29 @@ sweep. Both split over ranks without gathering the surface:
   its lowest global vertex; every rank evaluates only the collisions it owns, so each pair
   is counted once and sums are ``allreduce``'d.
 * **Halo.** A rank's local collision mesh is its own facets plus every remote facet whose
-  bounding box comes within ``radius`` of its *region*: the boxes of its facets and of its
-  owned surface vertices, grouped in chunks of :data:`CHUNK` items along a Morton curve;
+  bounding box comes within ``radius`` of its *region* and that has a vertex at or above
+  the rank's first owned block: the region is the boxes of its facets and of its owned
+  surface vertices, grouped in chunks of :data:`CHUNK` items along a Morton curve;
   the chunk boxes are the only thing every rank receives (a replicated coarse
   bounding-volume list), and each rank sends a neighbour only the facets that meet that
   neighbour's boxes. With L the longest surface edge, every primitive of a collision owned
   by a rank, every candidate ipctk merges into it and the one-ring faces that give its area
   weight lie within d_hat + 3 L of its lowest vertex, so a halo of radius
   d_hat + 3 L + 8 m holds all of them while no surface vertex has moved more than m since
-  the halo was built (distances change by at most 2 m, edges grow by at most 2 m).
+  the halo was built (distances change by at most 2 m, edges grow by at most 2 m). Each of
+  those facets contains a vertex of the collision (a primitive of it, a candidate holding
+  one, a face around one of its vertices or edges), and every vertex of an owned collision
+  is at or above its lowest, owned one: a facet whose vertices all belong to lower ranks
+  can serve no collision of this rank and is not sent.
+* **Detection restricted to owned pairs.** On more than one rank the local mesh's
+  ``can_collide`` (ipctk's filter, applied to vertex pairs in its broad phase; a candidate
+  is kept when any pair of its vertices passes) admits a pair only if both vertices are at
+  or above the first owned block and one of them is owned (:func:`ownership_filter`):
+  every candidate that ipctk merges into an owned collision contains that collision's
+  lowest vertex and another of its vertices, so it passes, while pairs of the halo that
+  belong to another rank are never narrow-phased, merged, filtered in Python nor swept by
+  the CCD here. The collision set is then cut to the owned collisions
+  (:func:`owned_collisions`), which the filter leaves few to drop.
 * **Exchanges.** Positions x = X + u of a local mesh's vertices are fetched from their
   owners each evaluation (point to point, :class:`VertexExchange`); gradient rows and
   Hessian triplets of remote vertices are sent back to their owners and summed there.
@@ -35,7 +49,8 @@ import ipctk
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["CHUNK", "SurfaceHalo", "SurfacePartition", "VertexExchange", "owned_collisions"]
+__all__ = ["CHUNK", "SurfaceHalo", "SurfacePartition", "VertexExchange", "owned_collisions",
+           "ownership_filter"]
 
 #: Region items (facets and owned vertices) per replicated bounding box.
 CHUNK = 32
@@ -182,12 +197,15 @@ class SurfaceHalo:
                                   item_hi[chunk].max(0) + radius))
             boxes = np.asarray(boxes).reshape(-1, 2, g)
             every = comm.allgather(boxes)
+            starts = np.r_[0, part.ranges[:-1]]
+            top = part.faces.max(axis=1)
             sends = []
             for q, theirs in enumerate(every):
                 mask = np.zeros(len(lo), bool)
                 if q != comm.rank:
                     for box_lo, box_hi in theirs:
                         mask |= np.all(lo <= box_hi, axis=1) & np.all(hi >= box_lo, axis=1)
+                    mask &= top >= starts[q]  # facets of lower ranks only: no pair of q's
                 sends.append(tuple(a[mask] for a in (part.face_ids, part.faces, part.rest,
                                                      part.free, part.body, part.labels)))
             got = comm.alltoall(sends)
@@ -218,6 +236,10 @@ class SurfaceHalo:
         if not part.self_contact:
             self.mesh.can_collide = ipctk.make_connected_components_filter(
                 _label_triangles(labels_v))
+        if comm.size > 1:
+            owned = ownership_filter(*np.searchsorted(self.vertices, [part.start, part.end]))
+            self.mesh.can_collide = owned if part.self_contact else \
+                self.mesh.can_collide & owned
         self.x_built = self.positions(u_owned)
 
     def positions(self, u_owned: np.ndarray) -> np.ndarray:
@@ -229,13 +251,38 @@ class SurfaceHalo:
         local = np.max(np.abs(x[self.owned] - self.x_built[self.owned]), initial=0.0)
         return self.part.comm.allreduce(float(local) * np.sqrt(self.part.gdim), op=MPI.MAX)
 
-    def owner_ok(self, ids) -> bool:
-        """Whether a collision with local vertex ids ``ids`` (-1: none) is this rank's."""
-        return bool(self.owned[min(i for i in ids if i >= 0)])
-
     def to_owners(self, rows: np.ndarray, owned_rows: np.ndarray) -> None:
         """Sum per-local-vertex ``rows`` into the owners' ``owned_rows`` (collective)."""
         self.exchange.add_back(rows, owned_rows)
+
+
+def ownership_filter(first: int, end: int) -> ipctk.CollisionFilter:
+    """ipctk's vertex-pair filter of a rank's local mesh: both vertices at or above local
+    vertex ``first`` and one of them below ``end`` (the owned local vertices are
+    ``first <= i < end``, as local vertices ascend with global blocks).
+
+    ipctk keeps a candidate when any pair of its vertices passes, so it keeps every
+    candidate holding the lowest vertex of a collision this rank owns together with another
+    vertex of that collision (module docstring); built from ipctk's own filters, so the
+    test runs in its broad phase without calling Python.
+    """
+    at_or_above = ~ipctk.make_static_obstacle_filter(int(first))  # i >= first and j >= first
+    return at_or_above & ipctk.make_static_obstacle_filter(int(end))  # i < end or j < end
+
+
+def _lowest_vertices(kind: str, items: list, edges: np.ndarray,
+                     faces: np.ndarray) -> np.ndarray:
+    """The lowest local vertex of each collision of one kind (one attribute read each)."""
+    if kind == "vv_collisions":
+        pairs = np.array([(c.vertex0_id, c.vertex1_id) for c in items], np.int64)
+        return pairs.min(axis=1)
+    if kind == "ee_collisions":
+        pairs = np.array([(c.edge0_id, c.edge1_id) for c in items], np.int64)
+        return np.minimum(edges[pairs[:, 0]].min(axis=1), edges[pairs[:, 1]].min(axis=1))
+    pairs = np.array([(c.edge_id if kind == "ev_collisions" else c.face_id, c.vertex_id)
+                      for c in items], np.int64)
+    cells = edges if kind == "ev_collisions" else faces
+    return np.minimum(cells[pairs[:, 0]].min(axis=1), pairs[:, 1])
 
 
 def owned_collisions(halo: SurfaceHalo, collisions: ipctk.NormalCollisions) -> \
@@ -250,8 +297,11 @@ def owned_collisions(halo: SurfaceHalo, collisions: ipctk.NormalCollisions) -> \
     owned.use_area_weighting = collisions.use_area_weighting
     edges, faces = halo.mesh.edges, halo.mesh.faces
     for kind in _KINDS:
-        setattr(owned, kind, [c for c in getattr(collisions, kind)
-                              if halo.owner_ok(c.vertex_ids(edges, faces))])
+        items = getattr(collisions, kind)
+        if items:
+            keep = halo.owned[_lowest_vertices(kind, items, edges, faces)]
+            items = [c for c, k in zip(items, keep) if k]
+        setattr(owned, kind, items)
     return owned
 
 

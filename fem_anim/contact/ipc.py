@@ -62,13 +62,20 @@ from fem_anim.contact.p2_surface import surface_faces
 from fem_anim.contact.rest_check import rest_problem
 from fem_anim.errors import SceneError
 
-__all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "HALO_MARGIN",
-           "narrow_phase_ccd"]
+__all__ = ["IPCContact", "CCD_MAX_ITERATIONS", "CCD_TOLERANCE", "HALO_GROWTH", "HALO_MARGIN",
+           "HALO_MAX_MARGIN", "narrow_phase_ccd"]
 
-#: The halo's margin m in units of the longest surface edge L: a halo of radius
-#: d_hat + (3 + 8 m/L) L is rebuilt once a surface vertex has moved more than m
+#: The halo's least margin m in units of the longest surface edge L: a halo of radius
+#: d_hat + 3 L + 8 m is rebuilt once a surface vertex has moved more than m
 #: (:mod:`fem_anim.contact.distribution`).
 HALO_MARGIN = 0.25
+#: A halo rebuilt because a vertex moved d past the old one's margin gets the margin
+#: max(HALO_MARGIN L, min(HALO_GROWTH d, HALO_MAX_MARGIN L)): a line search that tries
+#: points far out and comes back builds one wider halo instead of one per trial point,
+#: and no halo reaches further than d_hat + (3 + 8 HALO_MAX_MARGIN) L.
+HALO_GROWTH = 2.0
+#: The largest margin of a halo in units of L (see :data:`HALO_GROWTH`).
+HALO_MAX_MARGIN = 1.0
 
 #: Tight inclusion's precision of the time of impact (ipctk's default).
 CCD_TOLERANCE = 1.0e-6
@@ -197,17 +204,24 @@ class IPCContact:
     def _u_owned(self) -> np.ndarray:
         return self.u.x.array.reshape(-1, self.gdim)[: self.n_owned]
 
-    def _build_halo(self, reach=None):
+    def _build_halo(self, reach=None, moved: float = 0.0):
         """This rank's facets and the halo (collective; :mod:`fem_anim.contact.distribution`).
 
-        Default reach: d_hat + 3 L + 8 m with the margin m = :data:`HALO_MARGIN` L, kept
-        while no surface vertex moves more than m.
+        Default reach: d_hat + 3 L + 8 m with the margin
+        m = max(:data:`HALO_MARGIN` L, min(:data:`HALO_GROWTH` ``moved``,
+        :data:`HALO_MAX_MARGIN` L)), kept while no surface vertex moves more than m.
+
+        Args:
+            reach: The radius as a function of L instead (a CCD sweep's wider mesh).
+            moved: How far a vertex moved past the previous halo (m; 0 at set-up).
         """
         start = time.perf_counter()
+        margin = lambda L: max(HALO_MARGIN * L, min(HALO_GROWTH * moved,  # noqa: E731
+                                                    HALO_MAX_MARGIN * L))
         if reach is None:
-            reach = lambda L: self.offset + self.dhat + (3.0 + 8.0 * HALO_MARGIN) * L  # noqa: E731
+            reach = lambda L: self.offset + self.dhat + 3.0 * L + 8.0 * margin(L)  # noqa: E731
         halo = self.part.build(self._u_owned(), reach)
-        halo.margin = HALO_MARGIN * halo.longest
+        halo.margin = margin(halo.longest)
         #: the unknown's global row of each local vertex's components (from their owners)
         halo.unknown_global = halo.exchange.fetch(self.unknown_global)
         self.halo_builds += 1
@@ -238,7 +252,7 @@ class IPCContact:
         # do not depend on when halos were rebuilt (a resumed run repeats an uninterrupted one)
         self._drift = self.halo.drift(x) if self.comm.size > 1 else 0.0
         if self._drift > self.halo.margin:
-            self.halo = self._build_halo()
+            self.halo = self._build_halo(moved=self._drift)
             x, self._x, self._drift = self.halo.x_built, None, 0.0
         self.timers["exchange_s"] += time.perf_counter() - start
         start = time.perf_counter()

@@ -10,10 +10,13 @@ the final state, the barrier energy (with friction), its gradient, the action H 
 Hessian on two vectors z fixed by the dof coordinates, the CCD bound along a vector fixed
 by the coordinates, the pair count and the minimum distance are evaluated; a second set at
 a displacement moved past the halo's margin (so the halo is rebuilt mid-evaluation) and
-one with a sweep wider than the halo (so the CCD builds a wider local mesh). Rank 0 writes
+one with a sweep wider than the halo (so the CCD builds a wider local mesh); a last set at
+the final state rounded to 0.1 um, the same state to the bit on any number of ranks, with
+each rank's count of owned pairs. Rank 0 writes
 every per-dof array in the order of the dof coordinates, so runs on different rank counts
 compare entry by entry, with the trajectory (u after each step) and, per rank, how many
-facets its local mesh holds against the whole surface and how many halos it built.
+facets its local mesh holds against the whole surface (and, at the final state, by body)
+and how many halos it built.
 """
 
 from __future__ import annotations
@@ -132,17 +135,33 @@ def main() -> int:
     for k in range(steps):
         state, _ = sim.step(state, 0.01)
         out[f"u{k}"] = gather_sorted(sim, sim.problem.u.x.array)
+    u_final = sim.problem.u.x.array.copy()
     evaluate(sim, "final", out)
-    # past the margin: the halo is rebuilt inside the next evaluation
+    # what each rank's local mesh holds at the final state, by body: facets (own and
+    # halo) and own facets
+    local_body = ipc.halo.vertex_body[ipc.halo.faces[:, 0]]
+    counts = np.stack([np.bincount(local_body, minlength=4),
+                       np.bincount(ipc.part.body, minlength=4)])
+    counts = COMM.gather(counts, root=0)
+    # past the margin: the halo is rebuilt inside the next evaluation (a shear that changes
+    # the pairs, and a translation along the bars by more than any margin, at most L)
     halo = ipc.halo
     sim.problem.u.x.array[:] += field(sim, lambda X: 0.008 * np.sign(X[:, [0]] - 0.25)
-                                      * np.array([[0, 0, 1.0]]))
+                                      * np.array([[0, 0, 1.0]]) + np.array([[0.1, 0, 0]]))
     evaluate(sim, "moved", out)
     out["rebuilt"] = int(ipc.halo is not halo)
+    # the final state rounded to 0.1 um: the same bits on any number of ranks (the runs'
+    # states differ by ~1e-16 m), still in contact along the bars (pairs across the ranks)
+    sim.problem.u.x.array[:] = np.round(u_final, 7)
+    evaluate(sim, "set", out)
+    owned = COMM.gather(len(ipc.collisions), root=0)
     faces = COMM.gather(len(ipc.halo.faces), root=0)
     own = COMM.gather(len(ipc.part.faces), root=0)
     if COMM.rank == 0:
         out["local_faces"] = np.array(faces)
+        out["set_owned_pairs"] = np.array(owned)
+        out["final_local_bodies"] = np.array([c[0] for c in counts])
+        out["final_own_bodies"] = np.array([c[1] for c in counts])
         out["surface_faces"] = sum(own)
         np.savez(path, **out)
         print(f"local facets per rank {faces} of {sum(own)}; halo rebuilt {out['rebuilt']}; "

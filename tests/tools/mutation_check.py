@@ -1548,6 +1548,34 @@ MUTATIONS: list[Mutation] = [
              'cpu_ratio = fa["s_per_step"] / bl["cpu_per_step"]',
              ("tests/test_contact_cost.py::test_printed_numbers_recompute_from_the_csvs",),
              "the CPU-time ratio divides fem_anim's wall time by the baseline's CPU time"),
+    Mutation("halo-radius-unbounded", "fem_anim/contact/distribution.py",
+             "self.radius = radius = float(reach(self.longest))",
+             "self.radius = radius = 10 * float(reach(self.longest))",
+             ("tests/test_contact_distribution.py::"
+              "test_local_meshes_hold_their_share_and_a_halo",),
+             "the halo reaches ten times too far: far bodies enter every rank's local mesh "
+             "and each rank's detection runs over most of the surface"),
+    Mutation("halo-sends-lower-ranks-facets", "fem_anim/contact/distribution.py",
+             "                    mask &= top >= starts[q]",
+             "                    pass",
+             ("tests/test_contact_distribution.py::"
+              "test_local_meshes_hold_their_share_and_a_halo",),
+             "a rank receives facets whose vertices all belong to lower ranks, which serve "
+             "none of its pairs"),
+    Mutation("ownership-filter-unnegated", "fem_anim/contact/distribution.py",
+             "at_or_above = ~ipctk.make_static_obstacle_filter(int(first))",
+             "at_or_above = ipctk.make_static_obstacle_filter(int(first))",
+             ("tests/test_contact_distribution.py::test_distributed_contact_equals_serial",),
+             "the broad-phase filter keeps pairs below the first owned vertex instead of "
+             "above it: rank 0 detects no pair, and owned pairs go missing"),
+    Mutation("halo-gradient-rows-kept-local", "fem_anim/contact/distribution.py",
+             "        got = self.comm.alltoall([np.ascontiguousarray(rows[s]) for s in "
+             "self.slots])",
+             "        got = self.comm.alltoall([np.ascontiguousarray(rows[s]) * (q == "
+             "self.comm.rank) for q, s in enumerate(self.slots)])",
+             ("tests/test_contact_distribution.py::test_distributed_contact_equals_serial",),
+             "gradient rows of vertices owned by another rank are dropped instead of sent "
+             "to their owner: a pair across two ranks pushes one side only"),
 ]
 
 
