@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -1636,11 +1637,19 @@ def run_selection(scratch: Path, tests: tuple[str, ...], timeout: float) -> tupl
     start = time.perf_counter()
     cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-n", "0",
            "-m", "not slow or slow", *tests]
+    # its own process group, so that a timeout also ends the mpirun (and ranks) it started
+    proc = subprocess.Popen(cmd, cwd=scratch, env=environment(scratch), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
-        out = subprocess.run(cmd, cwd=scratch, env=environment(scratch), capture_output=True,
-                             text=True, timeout=timeout)
-        code, text = out.returncode, out.stdout + out.stderr
+        text, _ = proc.communicate(timeout=timeout)
+        code = proc.returncode
     except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:  # SIGKILL only after SIGTERM was ignored
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
         code, text = -1, "timeout"
     tail = " | ".join(line for line in text.strip().splitlines()[-3:])
     return code, time.perf_counter() - start, tail
