@@ -24,7 +24,7 @@ from fem_anim.forms.shell_bending import flexural_rigidity
 from fem_anim.meshes.sheet import structured_sheet
 from fem_anim.problem.shell_terms import ShellEnergy, shell_measures
 from fem_anim.reference import shell_kl_energy as reference
-from test_shell import clamped_newton
+from test_shell import SHEET, clamped_newton
 
 MU, LMBDA, THICKNESS, D, NU = 3.0, 2.0, 0.1, 0.7, 0.3
 
@@ -292,34 +292,9 @@ def test_end_moment_rolls_the_strip_to_the_analytic_radius(triangulation):
 
 # -- the Kirchhoff-Love sheet as a scene ---------------------------------------------------
 
-KL_SHEET = """
-name = "kl_sheet"
-[mesh]
-shape = "sheet"
-size = [0.4, 0.2]
-origin = [0.0, 0.0, 0.0]
-element_size = 0.1
-[element]
-degree = 2
-[shell]
-thickness = 0.002
-bending_model = "kirchhoff_love"
-[material]
-model = "stvk"
-youngs_modulus = 1.0e6
-poisson_ratio = 0.3
-density = 500.0
-[time]
-dt = 0.02
-steps = 12
-[gravity]
-acceleration = [0.0, 0.0, -9.81]
-[[pin]]
-min = [-0.01, -0.01, -0.01]
-max = [0.01, 0.21, 0.01]
-[output]
-render = false
-"""
+#: test_shell's sheet scene, P2 with Kirchhoff-Love bending
+KL_SHEET = SHEET.replace('name = "sheet"', 'name = "kl_sheet"').replace(
+    "[shell]\n", '[element]\ndegree = 2\n[shell]\nbending_model = "kirchhoff_love"\n')
 
 
 def test_kirchhoff_love_sheet_scene_runs(tmp_path):
