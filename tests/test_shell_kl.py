@@ -321,23 +321,9 @@ def test_kirchhoff_love_sheet_scene_runs(tmp_path):
 def test_kirchhoff_love_two_ranks_equal_serial(tmp_path):
     """The Kirchhoff-Love sheet on 2 ranks: stats energies and final displacement equal
     the serial run's to 1e-8 (edge terms between the ranks' cells included)."""
-    import meshio
+    from test_shell import two_ranks_equal_serial
 
-    from conftest import run_on_one_and_more_ranks
-    from test_cli import read_stats
-
-    scene = tmp_path / "kl.toml"
-    scene.write_text(KL_SHEET.replace("steps = 12", "steps = 4"))
-    outs = run_on_one_and_more_ranks(scene, tmp_path)
-    a, b = read_stats(outs[1] / "stats.csv"), read_stats(outs[2] / "stats.csv")
-    assert len(a) == len(b) == 4
-    for ra, rb in zip(a, b):
-        for key in ("kinetic", "elastic", "gravity"):
-            assert rb[key] == pytest.approx(ra[key], rel=1e-8, abs=1e-14), (ra["step"], key)
-    ua = meshio.read(outs[1] / "final.vtu")
-    ub = meshio.read(outs[2] / "final.vtu")
-    du = ub.point_data["displacement"] - ua.point_data["displacement"]
-    assert np.linalg.norm(du) <= 1e-8 * np.linalg.norm(ua.point_data["displacement"])
+    ua, _ = two_ranks_equal_serial(KL_SHEET.replace("steps = 12", "steps = 4"), 4, tmp_path)
     assert np.linalg.norm(ua.point_data["displacement"]) > 1e-3
 
 
