@@ -13,8 +13,10 @@ from fem_anim import compat
 
 __all__ = ["JIT_OPTIONS", "compile_forms"]
 
-#: FFCx/CFFI options of every kernel the problem compiles (forms and expressions).
-JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-march=native"]}
+#: FFCx/CFFI options of every kernel the problem compiles (forms and expressions). ``-g0``
+#: because CFFI compiles with Python's own CFLAGS, which carry ``-g``: debug information
+#: changes no instruction but slows gcc on large kernels (docs/cloth.md, "Cost").
+JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-g0", "-march=native"]}
 
 
 def compile_forms(forms: dict[str, ufl.Form]) -> dict:
