@@ -1577,6 +1577,46 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_contact_distribution.py::test_distributed_contact_equals_serial",),
              "gradient rows of vertices owned by another rank are dropped instead of sent "
              "to their owner: a pair across two ranks pushes one side only"),
+    Mutation("joint-layout-shell-over-solid", "fem_anim/mesh/joint_layout.py",
+             "return self._rank_start[owner] + self._inside[owner, k] + blocks - first",
+             "return self._rank_start[owner] + blocks - first",
+             ("tests/test_shell_solid.py::test_joint_objective_is_the_parts_plus_the_barrier",),
+             "the shell's joint blocks start at the rank's first block instead of after its "
+             "solid blocks: the barrier reads and writes the solid's rows for the shell"),
+    Mutation("joint-barrier-unweighted", "fem_anim/problem/joint_objective.py",
+             "value += float(self.weight.value) * self.ipc.energy()",
+             "value += self.ipc.energy()",
+             ("tests/test_shell_solid.py::test_joint_objective_is_the_parts_plus_the_barrier",
+              "tests/test_shell_solid.py::test_joint_gradient_and_hessian_pass_a_taylor_test"),
+             "the joint objective adds kappa B without the weight w that its gradient and "
+             "Hessian carry: the line search judges another function than Newton's"),
+    Mutation("joint-hessian-half-barrier", "fem_anim/problem/joint_objective.py",
+             "self.ipc.add_hessian(A, float(self.weight.value))",
+             "self.ipc.add_hessian(A, 0.5 * float(self.weight.value))",
+             ("tests/test_shell_solid.py::test_joint_objective_is_the_parts_plus_the_barrier",
+              "tests/test_shell_solid.py::test_joint_gradient_and_hessian_pass_a_taylor_test"),
+             "the joint Hessian holds half the barrier's: not the derivative of the gradient"),
+    Mutation("joint-offset-dropped", "fem_anim/contact/joint_surface.py",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), float(offset)",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), 0.0",
+             ("tests/test_shell_solid.py::test_joint_objective_is_the_parts_plus_the_barrier",
+              "tests/test_shell_solid.py::test_cloth_falls_on_a_soft_cube_without_intersection"),
+             "the joint barrier keeps no thickness: the cloth's mid-surface may touch the "
+             "solid and layers of cloth each other"),
+    Mutation("joint-barrier-spares-the-solid", "fem_anim/problem/joint_objective.py",
+             "        self.ipc.add_gradient(barrier, float(self.weight.value))\n"
+             "        barrier.array[self._pinned_rows] = 0.0\n        b.axpy(1.0, barrier)",
+             "        self.ipc.add_gradient(barrier, float(self.weight.value))\n"
+             "        barrier.array[: self.layout.offsets[1]] = 0.0\n        b.axpy(1.0, barrier)",
+             ("tests/test_shell_solid.py::test_free_collision_keeps_the_total_momentum",),
+             "the barrier pushes the shell but not the solid (its rows of the joint gradient "
+             "dropped): no reaction, Newton's third law broken, the step does not converge"),
+    Mutation("joint-offset-dropped-drape", "fem_anim/contact/joint_surface.py",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), float(offset)",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), 0.0",
+             ("tests/test_shell_solid.py::test_cloth_falls_on_a_soft_cube_without_intersection",),
+             "the joint barrier keeps no thickness: the stepped cloth comes nearer the cube "
+             "than t"),
 ]
 
 
