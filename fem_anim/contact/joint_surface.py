@@ -8,9 +8,9 @@ docs/notes/shell_solid_coupling.md). :class:`JointIPCContact` is :class:`IPCCont
 (:func:`~fem_anim.contact.contact_surface.surface_entities` of each mesh), their vertices
 numbered as the joint unknown's dof blocks (:class:`~fem_anim.mesh.joint_layout.JointLayout`:
 rank r's blocks are its owned solid blocks followed by its owned shell blocks, starting
-after all lower ranks' blocks of both spaces). Each rank then owns one contiguous range of blocks, which
-is all the distributed barrier (:mod:`fem_anim.contact.distribution`) asks of a numbering,
-so halo, pair ownership and exchanges are the solids' code.
+after all lower ranks' blocks of both spaces). Each rank then owns one contiguous range of
+blocks, which is all the distributed barrier (:mod:`fem_anim.contact.distribution`) asks of
+a numbering, so halo, pair ownership and exchanges are the solids' code.
 
 ipctk 1.6 keeps one minimum distance d_min for every pair; here d_min is the shell's
 thickness t: every surface is padded by t / 2, so two layers of the shell keep their
@@ -40,8 +40,9 @@ class JointIPCContact(IPCContact):
     """The barrier of ``[contact]`` on the union of several meshes' contact surfaces.
 
     The joint unknown's local array is the concatenation of each space's owned dofs
-    (:class:`~fem_anim.mesh.joint_layout.JointLayout`); every method of :class:`IPCContact` (energy, ``add_gradient``,
-    ``add_hessian``, ``step_bound``, ``stage``, ``finish_step``) then works on it.
+    (:class:`~fem_anim.mesh.joint_layout.JointLayout`); every method of
+    :class:`IPCContact` (energy, ``add_gradient``, ``add_hessian``, ``step_bound``,
+    ``stage``, ``finish_step``) then works on it.
 
     Args:
         cfg: The validated ``[contact]`` table (``self`` must be true: a shell's layers
@@ -59,8 +60,9 @@ class JointIPCContact(IPCContact):
             two non-adjacent elements are nearer than ``offset``.
     """
 
-    def __init__(self, cfg: dict, layout: JointLayout, displacements: list, pinned: list[np.ndarray],
-                 cell_bodies: list[np.ndarray], body_names: list[str], offset: float):
+    def __init__(self, cfg: dict, layout: JointLayout, displacements: list,
+                 pinned: list[np.ndarray], cell_bodies: list[np.ndarray],
+                 body_names: list[str], offset: float):
         spaces = [u.function_space for u in displacements]
         self.comm = comm = spaces[0].mesh.comm
         ipctk.set_num_threads(1)  # repeatable sums (fem_anim.contact.ipc)
