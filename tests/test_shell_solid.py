@@ -317,3 +317,33 @@ def test_a_mixed_solid_is_refused_in_one_line():
                            material={"model": "neohookean", "youngs_modulus": 2.0e4,
                                      "poisson_ratio": 0.3, "density": 500.0}), _shell())
     assert "formulation" in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.mpi
+def test_two_ranks_equal_serial(tmp_path):
+    """The cloth on the cube with friction (tests/mpi/mpi_shell_solid_check.py) on 2 ranks:
+    every step's total energy and both bodies' final displacements equal the serial run's to
+    1e-8, with pairs between the bodies."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, clean_environment, mpirun_command
+
+    script = ROOT / "tests" / "mpi" / "mpi_shell_solid_check.py"
+    results = {}
+    for ranks in (1, 2):
+        prefix = [] if ranks == 1 else mpirun_command(ranks)
+        if prefix is None:
+            pytest.skip("mpirun not available")
+        out = tmp_path / f"ranks{ranks}.npz"
+        r = subprocess.run([*prefix, sys.executable, str(script), str(out)],
+                           capture_output=True, text=True, timeout=900,
+                           env=clean_environment(), cwd=ROOT)
+        assert r.returncode == 0, r.stdout + r.stderr
+        results[ranks] = dict(np.load(out))
+    one, two = results[1], results[2]
+    assert one["pairs"][-1] > 0
+    assert np.allclose(two["energy"], one["energy"], rtol=1e-8, atol=0.0)
+    for body in ("solid", "shell"):
+        du = np.linalg.norm(two[body] - one[body])
+        assert du <= 1e-8 * np.linalg.norm(one[body]), body
