@@ -347,3 +347,129 @@ def test_two_ranks_equal_serial(tmp_path):
     for body in ("solid", "shell"):
         du = np.linalg.norm(two[body] - one[body])
         assert du <= 1e-8 * np.linalg.norm(one[body]), body
+
+
+# -- the scene file: a shell [[body]] beside solid ones (fem-anim run) ---------------------
+
+DRAPE_SOFT = """name = "drape_soft"
+[time]
+integrator = "implicit_euler"
+dt = 0.01
+steps = 6
+[gravity]
+acceleration = [0.0, 0.0, -9.81]
+[contact]
+dhat = 0.001
+friction = 0.3
+[output]
+render = false
+[[body]]
+name = "cube"
+mesh = { shape = "box", size = [0.1, 0.1, 0.1], origin = [-0.05, -0.05, 0.0], element_size = 0.05 }
+material = { model = "neohookean", youngs_modulus = 2.0e4, poisson_ratio = 0.3, density = 500.0 }
+[[body.pin]]
+min = [-1.0, -1.0, -1.0e-6]
+max = [1.0, 1.0, 1.0e-6]
+[[body]]
+name = "cloth"
+offset = [0.0, 0.0, 0.103]
+mesh = { shape = "sheet", size = [0.16, 0.16], origin = [-0.08, -0.08, 0.0], element_size = 0.04 }
+material = { model = "stvk", youngs_modulus = 1.0e5, poisson_ratio = 0.3, density = 300.0 }
+shell = { thickness = 0.001 }
+"""
+
+
+def _cli(tmp_path, name: str, text: str, *args) -> tuple[int, list[str]]:
+    """``fem-anim run`` of a scene text in this process: (exit code, stderr lines)."""
+    import contextlib
+    import io
+
+    from fem_anim.cli import main as cli_main
+
+    scene = tmp_path / f"{name}.toml"
+    scene.write_text(text)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = cli_main(["run", str(scene), "-o", str(tmp_path / name), "--quiet", *args])
+    return code, [line for line in err.getvalue().splitlines() if line.strip()]
+
+
+def _trajectory(path) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Rest points, cells and every frame's displacement of a written trajectory."""
+    import h5py
+
+    with h5py.File(path, "r") as h5:
+        count = len(h5.attrs["times"])
+        return (np.asarray(h5["data0"]), np.asarray(h5["data1"]),
+                [np.asarray(h5[f"data{k + 2}"]) for k in range(count)])
+
+
+def test_scene_file_with_a_shell_body_runs_intersection_free(tmp_path):
+    """``fem-anim run`` of a cloth [[body]] (with shell = {...}) beside a soft cube: both
+    trajectories hold every step; in no frame does the sheet cross the cube's boundary (the
+    independent check on both meshes' frames); stats and summary count the steps; the
+    run's steps are the Python API's (same displacements)."""
+    import json
+
+    import meshio
+
+    code, err = _cli(tmp_path, "drape", DRAPE_SOFT)
+    assert code == 0, err
+    out = tmp_path / "drape"
+    Xs, cube_cells, us = _trajectory(out / "solids.h5")
+    Xc, cloth_cells, uc = _trajectory(out / "shell.h5")
+    assert len(us) == len(uc) == 7
+    tris = np.concatenate([boundary_triangles(cube_cells), cloth_cells + len(Xs)])
+    for a, b in zip(us, uc):
+        assert len(crossing_pairs(np.concatenate([Xs + a, Xc + b]), tris)) == 0
+    assert (Xc + uc[-1])[:, 2].min() < TOP  # draped over the edges
+    stats = (out / "stats.csv").read_text().splitlines()
+    assert len(stats) == 7
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == 6 and not summary["energy"]["flagged"]
+    final = meshio.read(out / "final_shell.vtu")
+    assert np.array_equal(final.point_data["displacement"], uc[-1])
+    # the same steps through the Python API
+    from fem_anim.scene import load_scene
+    from fem_anim.simulation.joint_loop import JointSimulation
+
+    sim = JointSimulation.from_scene(load_scene(tmp_path / "drape.toml"))
+    states = sim.initial_state()
+    for _ in range(6):
+        states, _ = sim.step(states, 0.01)
+    cloth = sim.parts[1].V.tabulate_dof_coordinates() + states[1].u.reshape(-1, 3)
+    order = np.lexsort(np.round(Xc, 9).T[::-1])
+    mine = np.lexsort(np.round(sim.parts[1].V.tabulate_dof_coordinates(), 9).T[::-1])
+    assert np.abs(cloth[mine] - (Xc + uc[-1])[order]).max() < 1e-12
+
+
+BAD_JOINT = {
+    "two shells": (DRAPE_SOFT + DRAPE_SOFT[DRAPE_SOFT.index('[[body]]\nname = "cloth"'):]
+                   .replace('"cloth"', '"cloth2"'), "one [[body]] may have a shell"),
+    "kirchhoff-love": (DRAPE_SOFT.replace("shell = { thickness = 0.001 }",
+                                          "shell = { thickness = 0.001, bending_model = "
+                                          "\"kirchhoff_love\" }"), "needs P1"),
+    "newmark": (DRAPE_SOFT.replace('integrator = "implicit_euler"', 'integrator = "newmark"'),
+                "time.integrator"),
+    "mixed": (DRAPE_SOFT.replace("[output]", "[element]\nformulation = \"mixed\"\n[output]"),
+              "formulation"),
+    "wind": (DRAPE_SOFT + "[wind]\nvelocity = [1.0, 0.0, 0.0]\n", "[wind]"),
+    "rotated shell": (DRAPE_SOFT.replace("offset = [0.0, 0.0, 0.103]",
+                                         "offset = [0.0, 0.0, 0.103]\nrotation = [0.0, 0.0, 10.0]"),
+                      "rotation"),
+    "no self contact": (DRAPE_SOFT.replace("friction = 0.3", "friction = 0.3\nself = false"),
+                        "contact.self"),
+    "top-level shell": (DRAPE_SOFT + "[shell]\nthickness = 0.001\n", "body[i].shell"),
+    "resume": (DRAPE_SOFT, "--resume"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_JOINT))
+def test_bad_shell_with_solids_is_one_line_exit_2(case, tmp_path):
+    """Each refused combination ends with exit code 2 and one ``fem-anim: error:`` line."""
+    text, words = BAD_JOINT[case]
+    args = ("--resume", str(tmp_path / "bad")) if case == "resume" else ()
+    code, err = _cli(tmp_path, "bad", text, *args)
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("fem-anim: error: "), err
+    assert words in err[0], err[0]

@@ -16,7 +16,10 @@ updated by the scheme from its part of the joint solution. Drive it from Python:
 
 The solid's scene is a solid scene without ``[contact]``; the shell's scene is a shell
 scene whose ``[contact]`` (self contact on) becomes the barrier between and within both.
-The time, solver and integrator keys are the solid scene's and must equal the shell's.
+The time, solver and integrator keys are the solid scene's and must equal the shell's
+(:func:`fem_anim.scene.joint_rules.check_joint_parts`). A scene file with a shell
+``[[body]]`` beside solid ones is split into the two (:func:`split_joint_scene`,
+:meth:`JointSimulation.from_scene`).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from fem_anim.mesh.bodies import build_scene_mesh
 from fem_anim.problem.form_compiler import JIT_OPTIONS
 from fem_anim.problem.joint_objective import JointProblem
 from fem_anim.problem.objective import EnergyProblem
+from fem_anim.scene.joint_rules import check_joint_parts, joint_parts
 from fem_anim.scene.loading import Scene
 from fem_anim.simulation.initial_state import initial_velocity
 from fem_anim.simulation.integrators import Integrator, State
@@ -41,40 +45,14 @@ from fem_anim.simulation.loop import solver_options
 from fem_anim.solver.minimiser import Minimiser
 from fem_anim.solver.solve_stats import SolveStats
 
-__all__ = ["JOINT_INTEGRATORS", "JointSimulation", "check_joint_scenes"]
+__all__ = ["JointSimulation", "split_joint_scene"]
 
-#: Integrators of a joint run (Newmark's initial acceleration per part is not built yet).
-JOINT_INTEGRATORS = ("implicit_euler", "bdf2")
-
-
-def check_joint_scenes(solid: Scene, shell: Scene) -> str | None:
-    """The first reason the two scenes cannot run together, as one line (None: none)."""
-    if "shell" in solid.data or solid["mesh"]["dim"] != 3:
-        return "the solid's scene must be a 3D solid scene (no [shell])"
-    if "shell" not in shell.data:
-        return "the shell's scene needs a [shell] table"
-    if "contact" in solid.data:
-        return "the solid's scene has no [contact]: the shell's [contact] is the joint one"
-    if "contact" not in shell.data:
-        return "the shell's scene needs [contact]: the barrier between the shell and the solid"
-    if shell["shell"]["bending_model"] != "hinge":
-        return "a shell with a solid needs P1: shell.bending_model = \"hinge\""
-    for scene, who in ((solid, "solid"), (shell, "shell")):
-        if scene["element"]["degree"] != 1:
-            return f"the {who}'s element.degree must be 1 with a shell and a solid"
-        if scene["element"]["formulation"] != "displacement":
-            return f"the {who}'s element.formulation must be \"displacement\""
-        if scene["time"]["integrator"] not in JOINT_INTEGRATORS:
-            return (f"time.integrator of the {who} must be one of "
-                    f"{', '.join(JOINT_INTEGRATORS)} with a shell and a solid, got "
-                    f"{scene['time']['integrator']!r}")
-        if scene["solver"]["hessian"] not in ("exact", "auto"):
-            return (f"the {who}'s solver.hessian must be \"exact\" with a shell and a solid "
-                    f"(the joint step assembles the exact Hessian), got "
-                    f"{scene['solver']['hessian']!r}")
-    if solid["time"] != shell["time"]:
-        return "the solid's and the shell's [time] tables must be equal"
-    return None
+def split_joint_scene(scene: Scene) -> tuple[Scene, Scene]:
+    """The solids' and the shell's scenes of a validated scene with a shell body
+    (:func:`fem_anim.scene.joint_rules.joint_parts`; validated as a whole already)."""
+    solid, shell = joint_parts(scene.data)
+    return (Scene._of(solid, scene.source, scene.base_dir),
+            Scene._of(shell, scene.source, scene.base_dir))
 
 
 class JointSimulation:
@@ -85,15 +63,23 @@ class JointSimulation:
         shell: The shell's validated scene, with ``[contact]``.
         comm: MPI communicator.
         cli_options: PETSc options from the command line (highest precedence).
+        preset: Linear solver preset overriding ``solver.preset``.
 
     Raises:
-        SceneError: the scenes cannot run together (:func:`check_joint_scenes`), or their
+        SceneError: the scenes cannot run together (:func:`~fem_anim.scene.joint_rules.check_joint_parts`), or their
             surfaces cross or lie within ``contact.dhat`` at rest.
     """
 
+    @classmethod
+    def from_scene(cls, scene: Scene, comm: MPI.Comm = MPI.COMM_WORLD,
+                   cli_options: dict[str, str] | None = None,
+                   preset: str | None = None) -> JointSimulation:
+        """The simulation of a scene with a shell body (:func:`split_joint_scene`)."""
+        return cls(*split_joint_scene(scene), comm, cli_options, preset)
+
     def __init__(self, solid: Scene, shell: Scene, comm: MPI.Comm = MPI.COMM_WORLD,
-                 cli_options: dict[str, str] | None = None):
-        error = check_joint_scenes(solid, shell)
+                 cli_options: dict[str, str] | None = None, preset: str | None = None):
+        error = check_joint_parts(solid.data, shell.data)
         if error:
             raise SceneError(error)
         self.comm = comm
@@ -103,11 +89,13 @@ class JointSimulation:
         with compat.jit_locks_released(JIT_OPTIONS):
             parts = [EnergyProblem(scene, domain)
                      for scene, domain in zip(self.scenes, self.domains)]
+        #: the solids' scene name: a scene with a shell body is run under its own name
+        self.name = solid.name
         names = [b["name"] for b in solid["body"]] if solid["body"] else ["solid"]
         names.append(shell["name"])
         self.problem = JointProblem(parts, shell["contact"], shell["shell"]["thickness"], names)
         self.integrator = Integrator(solid["time"]["integrator"])
-        self.options = solver_options(solid, cli_options, None, comm.size)
+        self.options = solver_options(solid, cli_options, preset, comm.size)
         # the exact Hessian (the barrier's per-pair projected): a shell has no filtered one
         self.minimiser = Minimiser(self.problem, self.options,
                                    settings=solid["solver"] | {"hessian": "exact"})
