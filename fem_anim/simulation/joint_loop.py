@@ -66,8 +66,9 @@ class JointSimulation:
         preset: Linear solver preset overriding ``solver.preset``.
 
     Raises:
-        SceneError: the scenes cannot run together (:func:`~fem_anim.scene.joint_rules.check_joint_parts`), or their
-            surfaces cross or lie within ``contact.dhat`` at rest.
+        SceneError: the scenes cannot run together
+            (:func:`~fem_anim.scene.joint_rules.check_joint_parts`), or their surfaces cross
+            or lie within ``contact.dhat`` at rest.
     """
 
     @classmethod
