@@ -25,6 +25,8 @@ The time, solver and integrator keys are the solid scene's and must equal the sh
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 from dolfinx.fem import petsc as fem_petsc
@@ -45,7 +47,28 @@ from fem_anim.simulation.loop import solver_options
 from fem_anim.solver.minimiser import Minimiser
 from fem_anim.solver.solve_stats import SolveStats
 
-__all__ = ["JointSimulation", "split_joint_scene"]
+__all__ = ["JointSimulation", "JointState", "split_joint_scene"]
+
+
+@dataclass
+class JointState:
+    """The parts' states advancing together, shaped for
+    :class:`~fem_anim.simulation.adaptive.AdaptiveStepper` (time, step count, and BDF2's
+    history: ``u_old``/``v_old`` None when the next step must restart it).
+
+    Attributes:
+        parts: Each part's :class:`~fem_anim.simulation.integrators.State`.
+        time: Time (s).
+        step: Completed steps.
+        u_old: True when every part holds BDF2's previous step, else None.
+        v_old: Likewise.
+    """
+
+    parts: list[State]
+    time: float = 0.0
+    step: int = 0
+    u_old: bool | None = None
+    v_old: bool | None = None
 
 def split_joint_scene(scene: Scene) -> tuple[Scene, Scene]:
     """The solids' and the shell's scenes of a validated scene with a shell body
@@ -132,6 +155,41 @@ class JointSimulation:
         total["contact"] += barrier
         total["total_energy"] += barrier
         return total
+
+    def timed_step(self, state: JointState, dt: float) -> tuple[JointState, dict]:
+        """:meth:`step` on a :class:`JointState` and its ``stats.csv`` row (collective):
+        what :class:`~fem_anim.simulation.adaptive.AdaptiveStepper` takes substeps with.
+
+        Raises:
+            ConvergenceError: as :meth:`step`, and for a non-finite displacement or energy.
+        """
+        start = time.perf_counter()
+        ipc = self.problem.ipc
+        for key in ipc.timers:  # this step's contact time only (not failed tries')
+            ipc.timers[key] = 0.0
+        parts = state.parts if state.u_old else \
+            [replace(s, u_old=None, v_old=None) for s in state.parts]
+        new, stats = self.step(parts, dt)
+        energies = self.energies(new)
+        bad = not (all(np.all(np.isfinite(s.u)) for s in new)
+                   and all(map(math.isfinite, energies.values())))
+        if self.comm.allreduce(bad, op=MPI.LOR):
+            raise ConvergenceError(f"step {new[0].step} (t = {new[0].time:.6g} s) produced "
+                                   "a non-finite displacement or energy")
+        wall = time.perf_counter() - start
+        row = {"step": state.step + 1, "time": new[0].time, "dt": dt,
+               "newton_its": stats.newton_its, "linear_its": stats.linear_its,
+               "snes_reason": stats.reason, "residual_norm": stats.residual_norm,
+               "initial_residual_norm": stats.initial_residual_norm,
+               "newton_decrement": stats.newton_decrement, **energies,
+               "assembly_s": stats.assembly_s, "factor_s": stats.factor_s,
+               "linear_solve_s": stats.linear_solve_s,
+               "other_s": wall - stats.assembly_s - stats.factor_s - stats.linear_solve_s,
+               "solve_wall_s": stats.wall_s, "step_wall_s": wall,
+               "contact_s": sum(ipc.timers.values()),
+               "hessian_assemblies": stats.hessian_assemblies,
+               "factorisations": stats.factorisations, **ipc.step_stats()}
+        return JointState(new, new[0].time, state.step + 1, True, True), row
 
     def step(self, states: list[State], h: float) -> tuple[list[State], SolveStats]:
         """Advance both parts one step of size ``h``: stage, one minimisation, update.

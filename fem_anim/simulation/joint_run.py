@@ -2,42 +2,41 @@
 
 The scene is split into the solids' and the shell's scenes and stepped as one minimisation
 per step (:class:`~fem_anim.simulation.joint_loop.JointSimulation`; seed eq. 4). The run
-takes ``time.steps`` steps of ``time.dt`` (no adaptive retries: a step that does not
-converge stops the run with the solver's message) and writes, like a one-mesh run, into a
-claimed output directory whose files are installed only when the run succeeds
+reaches ``time.steps`` frames of ``time.dt``, each by substeps retried with dt halved when
+one does not converge (:class:`~fem_anim.simulation.adaptive.AdaptiveStepper`,
+``time.adaptive``, ``time.min_dt``), and writes, like a one-mesh run, into a claimed output
+directory whose files are installed only when the run succeeds
 (:class:`~fem_anim.output.files.RunDirectory`):
 
 * ``solids.xdmf`` + ``.h5`` and ``shell.xdmf`` + ``.h5``: each mesh's trajectory
   (displacement and cell energy density per frame, every ``output.every`` steps and the
   last; ParaView opens both), ``final_solids.vtu`` and ``final_shell.vtu``;
-* ``stats.csv``: one row per step (Newton and linear iterations, the energies of both
+* ``stats.csv``: one row per substep (Newton and linear iterations, the energies of both
   bodies and the barrier, the contact pairs and smallest distance, wall times);
 * ``scene.json`` (the scene as validated) and ``summary.json`` (steps, iterations, the
   energy report of :func:`~fem_anim.simulation.energy_report.energy_report` over both
   bodies, software versions, PETSc options).
 
-Not done for such a run yet: checkpoints and ``--resume``, adaptive step retries, rendered
+Not done for such a run yet: checkpoints and ``--resume``, rendered
 pictures and the USD export (both read one ``trajectory.xdmf``; ParaView reads the two
 trajectories); the run says so in one line when ``output.render`` or ``output.usd`` is on.
 """
 
 from __future__ import annotations
 
-import math
 import sys
-import time
 from pathlib import Path
 
-import numpy as np
 from mpi4py import MPI
 
-from fem_anim.errors import ConvergenceError, FemAnimError, describe_os_error
+from fem_anim.errors import FemAnimError, describe_os_error
 from fem_anim.output.files import (CellGather, RunDirectory, StatsWriter, VertexGather,
                                    write_final, write_scene)
 from fem_anim.output.trajectory import TrajectoryWriter
 from fem_anim.scene.loading import Scene
 from fem_anim.simulation.energy_report import energy_report, roundoff_energy, write_summary
-from fem_anim.simulation.joint_loop import JointSimulation
+from fem_anim.simulation.adaptive import AdaptiveStepper
+from fem_anim.simulation.joint_loop import JointSimulation, JointState
 
 __all__ = ["PART_FILES", "run_joint"]
 
@@ -57,31 +56,6 @@ def _io(comm: MPI.Comm, path: Path, write, *args):
     if error:
         raise FemAnimError(f"{error} (nothing was deleted)")
     return result
-
-
-def _row(sim: JointSimulation, states, stats, dt: float, wall: float) -> dict:
-    """The step's ``stats.csv`` row (collective)."""
-    energies = sim.energies(states)
-    bad = not (all(np.all(np.isfinite(s.u)) for s in states)
-               and all(map(math.isfinite, energies.values())))
-    if sim.comm.allreduce(bad, op=MPI.LOR):
-        raise ConvergenceError(f"step {states[0].step} (t = {states[0].time:.6g} s) produced "
-                               "a non-finite displacement or energy")
-    ipc = sim.problem.ipc
-    contact_s = sum(ipc.timers.values())
-    for key in ipc.timers:
-        ipc.timers[key] = 0.0
-    return {"step": states[0].step, "time": states[0].time, "dt": dt,
-            "newton_its": stats.newton_its, "linear_its": stats.linear_its,
-            "snes_reason": stats.reason, "residual_norm": stats.residual_norm,
-            "initial_residual_norm": stats.initial_residual_norm,
-            "newton_decrement": stats.newton_decrement, **energies,
-            "assembly_s": stats.assembly_s, "factor_s": stats.factor_s,
-            "linear_solve_s": stats.linear_solve_s,
-            "other_s": wall - stats.assembly_s - stats.factor_s - stats.linear_solve_s,
-            "solve_wall_s": stats.wall_s, "step_wall_s": wall, "contact_s": contact_s,
-            "hessian_assemblies": stats.hessian_assemblies,
-            "factorisations": stats.factorisations, **ipc.step_stats()}
 
 
 def run_joint(scene: Scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD,
@@ -135,15 +109,16 @@ def run_joint(scene: Scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD,
         try:
             for writer, (u, e) in zip(writers, fields(states)):
                 _io(comm, writer.h5_path, writer.write, 0.0, u, e)
-            for step in range(1, steps + 1):
-                start = time.perf_counter()
-                states, stats = sim.step(states, dt)
-                row = _row(sim, states, stats, dt, time.perf_counter() - start)
-                rows.append(row)
-                _io(comm, stats_file.path, stats_file.write, row)
-                if step % every == 0 or step == steps:
-                    for writer, (u, e) in zip(writers, fields(states)):
-                        _io(comm, writer.h5_path, writer.write, states[0].time, u, e)
+            stepper = AdaptiveStepper(sim, dt, scene["time"])
+            state = JointState(states)
+            for frame in range(1, steps + 1):
+                for state, row in stepper.advance(state, frame * dt):
+                    rows.append(row)
+                    _io(comm, stats_file.path, stats_file.write, row)
+                if frame % every == 0 or frame == steps:
+                    for writer, (u, e) in zip(writers, fields(state.parts)):
+                        _io(comm, writer.h5_path, writer.write, frame * dt, u, e)
+            states = state.parts
         finally:
             stats_file.close()
         finals = fields(states)

@@ -1617,6 +1617,12 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_solid.py::test_cloth_falls_on_a_soft_cube_without_intersection",),
              "the joint barrier keeps no thickness: the stepped cloth comes nearer the cube "
              "than t"),
+    Mutation("joint-scene-shell-offset-dropped", "fem_anim/scene/joint_rules.py",
+             "mesh[\"origin\"] = [float(a + b) for a, b in zip(origin, body[\"offset\"])]",
+             "mesh[\"origin\"] = origin",
+             ("tests/test_shell_solid.py::test_scene_file_with_a_shell_body_runs_intersection_free",),
+             "a shell body's offset is not applied to its sheet: the cloth is built inside "
+             "the cube"),
 ]
 
 
