@@ -451,6 +451,12 @@ def test_scene_file_with_a_shell_body_runs_intersection_free(tmp_path):
     assert summary["steps"] == 6 and not summary["energy"]["flagged"]
     final = meshio.read(out / "final_shell.vtu")
     assert np.array_equal(final.point_data["displacement"], uc[-1])
+    # the seen surface (trajectory.h5, what the renderer draws): both meshes' points, the
+    # cube's boundary and the cloth, every frame the two parts' frames side by side
+    X, seen, u = _trajectory(out / "trajectory.h5")
+    assert np.array_equal(X, np.concatenate([Xs, Xc]))
+    assert np.array_equal(np.sort(seen, axis=1), np.sort(tris, axis=1))
+    assert all(np.array_equal(f, np.concatenate([a, b])) for f, a, b in zip(u, us, uc))
     # the same steps through the Python API
     from fem_anim.scene import load_scene
     from fem_anim.simulation.joint_loop import JointSimulation
@@ -463,6 +469,19 @@ def test_scene_file_with_a_shell_body_runs_intersection_free(tmp_path):
     order = np.lexsort(np.round(Xc, 9).T[::-1])
     mine = np.lexsort(np.round(sim.parts[1].V.tabulate_dof_coordinates(), 9).T[::-1])
     assert np.abs(cloth[mine] - (Xc + uc[-1])[order]).max() < 1e-12
+
+
+def test_a_shell_body_run_is_drawn_in_3d(tmp_path):
+    """The renderer reads the seen surface of a scene with a shell [[body]] as a surface in
+    3D (its scene.json's body has a shell table), as a [shell] scene's."""
+    import json
+
+    from fem_anim.render.frames import space_dim
+
+    scene = {"mesh": {"dim": 3}, "body": [{"name": "cube"}, {"name": "cloth",
+                                                              "shell": {"thickness": T}}]}
+    (tmp_path / "scene.json").write_text(json.dumps({"scene": scene}))
+    assert space_dim("triangle", tmp_path) == 3
 
 
 BAD_JOINT = {
