@@ -25,7 +25,8 @@ from fem_anim.scene.shell_rules import SHELL_SHAPES, check_shell
 __all__ = ["JOINT_INTEGRATORS", "check_joint", "check_joint_parts", "joint_parts",
            "shell_body"]
 
-#: Integrators of a shell with solids (Newmark's initial acceleration per part is not built).
+#: Integrators of a shell with solids: the implicit ones that contact takes (Newmark is
+#: refused with contact in every scene: :mod:`fem_anim.scene.contact_integrator`).
 JOINT_INTEGRATORS = ("implicit_euler", "bdf2")
 
 
