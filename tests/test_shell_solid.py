@@ -566,3 +566,14 @@ def test_bodies_apart_step_as_their_own_runs(integrator):
         scale = np.abs(state.u).max()
         assert scale > 1e-4
         assert np.abs(states[k].u - state.u).max() <= 1e-9 * scale, k
+
+
+def test_block_storage_solves_the_joint_step(tmp_path):
+    """A preset storing 3 x 3 blocks (``cg-icc``: ``mat_type = baij``) gives the joint
+    Hessian in blocks and the run the direct solver's steps (to the stopping tests)."""
+    finals = []
+    for preset in ("cholesky", "cg-icc"):
+        code, err = _cli(tmp_path, f"drape_{preset}", DRAPE_SOFT, "--solver", preset)
+        assert code == 0, err
+        finals.append(_trajectory(tmp_path / f"drape_{preset}" / "shell.h5")[2][-1])
+    assert np.abs(finals[1] - finals[0]).max() < 1e-6 * np.abs(finals[0]).max()

@@ -153,10 +153,15 @@ class JointProblem:
 
     def create_matrix(self, mat_type: str | None = None) -> PETSc.Mat:
         """The joint Hessian: the parts' sparsity on the diagonal, accepting the barrier's
-        new nonzeros (collective)."""
-        if mat_type not in (None, "aij"):
-            raise ValueError(f"the joint Hessian is stored as aij, not {mat_type!r}")
+        new nonzeros (collective).
+
+        Args:
+            mat_type: ``"baij"`` stores 3 x 3 blocks (as a one-mesh problem's
+                :meth:`~fem_anim.problem.matrices.Matrices.create_matrix`); None or
+                ``"aij"``: scalar rows.
+        """
         L = self.layout
+        b = L.bs if mat_type == "baij" else 1
         n = L.bs * L.n_owned
         rows, cols = [], []
         for k, (part, A) in enumerate(zip(self.parts, self._A_parts)):
@@ -166,14 +171,16 @@ class JointProblem:
             r, c, _ = self._part_triplets(k, A)
             rows.append(r)
             cols.append(c)
-        rows, cols = np.concatenate(rows), np.concatenate(cols)
-        lo, hi = L.bs * L.start, L.bs * (L.start + L.n_owned)
-        local = rows - lo
-        diag = (cols >= lo) & (cols < hi)
-        d_nnz = np.bincount(local[diag], minlength=n).astype(PETSc.IntType)
-        o_nnz = np.bincount(local[~diag], minlength=n).astype(PETSc.IntType)
-        A = PETSc.Mat().createAIJ(((n, L.bs * L.size), (n, L.bs * L.size)),
-                                  nnz=(d_nnz, o_nnz), comm=self.comm)
+        # the nonzeros of each (block) row, in the diagonal and off-diagonal parts
+        pairs = np.unique(np.stack([np.concatenate(rows) // b, np.concatenate(cols) // b]),
+                          axis=1)
+        lo, hi = L.bs * L.start // b, L.bs * (L.start + L.n_owned) // b
+        local, diag = pairs[0] - lo, (pairs[1] >= lo) & (pairs[1] < hi)
+        d_nnz = np.bincount(local[diag], minlength=n // b).astype(PETSc.IntType)
+        o_nnz = np.bincount(local[~diag], minlength=n // b).astype(PETSc.IntType)
+        size = ((n, L.bs * L.size), (n, L.bs * L.size))
+        A = PETSc.Mat().createBAIJ(size, b, nnz=(d_nnz, o_nnz), comm=self.comm) \
+            if b > 1 else PETSc.Mat().createAIJ(size, nnz=(d_nnz, o_nnz), comm=self.comm)
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         return A
