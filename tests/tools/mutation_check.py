@@ -1636,7 +1636,8 @@ MUTATIONS: list[Mutation] = [
     Mutation("joint-parts-staged-with-another-weight", "fem_anim/problem/joint_objective.py",
              "            part.stage(u0, y, weight, t, h, d)",
              "            part.stage(u0, y, weight * (1.0 + 1e-3), t, h, d)",
-             ("tests/test_shell_solid.py::test_bodies_apart_step_as_their_own_runs[implicit_euler]",),
+             ("tests/test_shell_solid.py::"
+              "test_bodies_apart_step_as_their_own_runs[implicit_euler]",),
              "the parts' step objectives get another weight w than the scheme's: the joint "
              "step is not the bodies' implicit step even where they do not touch"),
     Mutation("joint-baij-preallocated-per-scalar-row", "fem_anim/problem/joint_objective.py",
