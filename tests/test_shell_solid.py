@@ -471,6 +471,24 @@ def test_scene_file_with_a_shell_body_runs_intersection_free(tmp_path):
     assert np.abs(cloth[mine] - (Xc + uc[-1])[order]).max() < 1e-12
 
 
+def test_python_api_runs_a_shell_body_scene(tmp_path):
+    """``fem_anim.run`` of the scene: the Run reads the seen surface of both meshes (6
+    steps, 7 frames, the cloth lowered); ``Simulation`` (one mesh) refuses the scene in one
+    line, naming the way to run it."""
+    import fem_anim
+    from fem_anim.errors import FemAnimError
+    from fem_anim.simulation.loop import Simulation
+
+    scene = fem_anim.Scene.from_toml(DRAPE_SOFT)
+    with fem_anim.run(scene, tmp_path / "api") as run:
+        assert len(run.times) == 7 and len(run.stats) == 6
+        X, u = run.points, run.displacement(-1)
+        assert X.shape[1] == 3 and u[:, 2].min() < -1e-3  # the cloth fell
+    with pytest.raises(FemAnimError) as err:
+        Simulation(scene)
+    assert "fem-anim run" in str(err.value) and "\n" not in str(err.value)
+
+
 def test_a_shell_body_run_is_drawn_in_3d(tmp_path):
     """The renderer reads the seen surface of a scene with a shell [[body]] as a surface in
     3D (its scene.json's body has a shell table), as a [shell] scene's."""
