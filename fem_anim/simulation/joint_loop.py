@@ -123,6 +123,7 @@ class JointSimulation:
         # the exact Hessian (the barrier's per-pair projected): a shell has no filtered one
         self.minimiser = Minimiser(self.problem, self.options,
                                    settings=solid["solver"] | {"hessian": "exact"})
+        self.minimiser.require_read(cli_options or {})  # a misspelt option is an error
         self.x_work = self.problem.create_vector()
 
     @property
