@@ -23,13 +23,11 @@ from __future__ import annotations
 
 import ipctk
 import numpy as np
-from mpi4py import MPI
 
 from fem_anim.contact.contact_surface import surface_entities
 from fem_anim.contact.distribution import SurfacePartition
-from fem_anim.contact.ipc import IPCContact, narrow_phase_ccd
+from fem_anim.contact.ipc import IPCContact
 from fem_anim.contact.p2_surface import surface_faces
-from fem_anim.contact.rest_check import rest_problem
 from fem_anim.errors import SceneError
 from fem_anim.mesh.joint_layout import JointLayout
 
@@ -40,9 +38,10 @@ class JointIPCContact(IPCContact):
     """The barrier of ``[contact]`` on the union of several meshes' contact surfaces.
 
     The joint unknown's local array is the concatenation of each space's owned dofs
-    (:class:`~fem_anim.mesh.joint_layout.JointLayout`); every method of
-    :class:`IPCContact` (energy, ``add_gradient``, ``add_hessian``, ``step_bound``,
-    ``stage``, ``finish_step``) then works on it.
+    (:class:`~fem_anim.mesh.joint_layout.JointLayout`); only the surface's partition and
+    the displacements it reads are built here, the rest is :class:`IPCContact`'s (its
+    ``_start``), so every method (energy, ``add_gradient``, ``add_hessian``,
+    ``step_bound``, ``stage``, ``finish_step``) works on the joint unknown.
 
     Args:
         cfg: The validated ``[contact]`` table (``self`` must be true: a shell's layers
@@ -98,34 +97,7 @@ class JointIPCContact(IPCContact):
         self.part = SurfacePartition(comm, faces, rest, free, body, np.zeros_like(faces),
                                      np.concatenate(owned_X), start, start + self.n_owned,
                                      True)
-        self.timers = {"detection_s": 0.0, "barrier_s": 0.0, "ccd_s": 0.0, "exchange_s": 0.0}
-        self.kappa = float(cfg["stiffness"]) if cfg["stiffness"] != "adaptive" else 0.0
-        self.kappa_floor = 0.0
-        self.balanced = False
-        self.weight = 1.0
-        self._distance = np.inf
-        self.projection = ipctk.PSDProjectionMethod.CLAMP
-        self.friction = None
-        self._x = None
-        self._drift = 0.0
-        self.potential = ipctk.BarrierPotential(self.dhat, 1.0, True)
-        self.ccd = narrow_phase_ccd()
-        self.collisions = ipctk.NormalCollisions()
-        self.collisions.use_area_weighting = True
-        rest_owned = self.part.owned_rest
-        lo = np.min(rest_owned, axis=0, initial=np.inf)
-        hi = np.max(rest_owned, axis=0, initial=-np.inf)
-        comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
-        comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
-        self.diagonal = float(np.linalg.norm(hi - lo))
-        self.halo_builds = 0
-        self.halo = self._build_halo()
-        x = self._update()
-        error = rest_problem(comm, self.halo, x, self.collisions,
-                             np.sqrt(self._min_distance(x)), self.offset, self.dhat,
-                             body_names)
-        if error:
-            raise SceneError(error)
+        self._start(body_names)
 
     def _u_owned(self) -> np.ndarray:
         """The owned displacement blocks of every part, in the joint order."""
