@@ -595,3 +595,40 @@ def test_block_storage_solves_the_joint_step(tmp_path):
         assert code == 0, err
         finals.append(_trajectory(tmp_path / f"drape_{preset}" / "shell.h5")[2][-1])
     assert np.abs(finals[1] - finals[0]).max() < 1e-6 * np.abs(finals[0]).max()
+
+
+def test_cloth_lands_on_itself_beside_a_solid(tmp_path):
+    """The shell's self contact inside the joint barrier: the U-folded strip of
+    tests/test_shell_contact.py (lower leg and wall held, no bending stiffness) beside a cube
+    far away. Its upper leg falls onto the lower leg: cloth-cloth pairs form, no vertex of
+    the upper leg over the lower one comes nearer than t (the joint d_min), and it ends
+    within t + d_hat, as in the shell's own scene; no frame has a crossing."""
+    from test_shell_contact import _u_fold
+
+    length, gap = 0.1, 0.02
+    points = _u_fold(tmp_path / "fold.obj", length, gap)
+    time_cfg = {"dt": 0.01, "steps": 25, "integrator": "implicit_euler"}
+    solid = _solid(time=time_cfg, mesh={"shape": "box", "size": [0.1, 0.1, TOP],
+                                        "origin": [0.5, 0.5, 0.0], "element_size": 0.05})
+    shell = _shell(time=time_cfg, mesh={"shape": "file", "file": str(tmp_path / "fold.obj")},
+                   shell={"thickness": T, "bending": 0.0}, damping={"alpha": 5.0},
+                   pin=[{"min": [-0.01, -0.01, -0.001], "max": [length + 0.001, 0.07, 0.001]},
+                        {"min": [length - 0.001, -0.01, -0.001],
+                         "max": [length + 0.001, 0.07, gap - 0.001]}])
+    sim = _simulation(solid, shell)
+    X = sim.parts[1].V.tabulate_dof_coordinates()
+    _, tris, _ = _union_surface(sim)
+    upper = np.isclose(X[:, 2], gap) & (X[:, 0] < length - 1e-9)
+    assert upper.sum() > 0 and len(points) == len(X)
+    states = sim.initial_state()
+    lowest, pairs = [], 0
+    for _ in range(25):
+        states, _ = sim.step(states, 0.01)
+        pairs = max(pairs, sim.problem.ipc.num_pairs)
+        x = X + states[1].u.reshape(-1, 3)
+        over = upper & (x[:, 0] > 0) & (x[:, 0] < length)
+        lowest.append(x[over, 2].min())
+        assert len(crossing_pairs(_vertex_positions(sim, states), tris)) == 0
+    assert pairs > 0
+    assert min(lowest) >= T * (1 - 1e-9)
+    assert lowest[-1] < T + DHAT
