@@ -130,6 +130,9 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     overrides = (['solver.mode="preview"'] if args.preview else []) + args.overrides
     scene = load_scene(args.scene, overrides)  # validate before importing dolfinx
     out = _output_directory(args, scene)
+    from fem_anim.scene.joint_rules import shell_body
+    if shell_body(scene.data) is not None:  # a shell beside solids: two meshes, one step
+        return _run_joint(args, scene, Path(out), cli_options)
     from fem_anim.scene.contact_integrator import integrator_note
     if (note := integrator_note(scene.data)) and not args.quiet and MPI.COMM_WORLD.rank == 0:
         print(f"fem-anim: {note}", file=sys.stderr)
@@ -170,6 +173,31 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
             print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, "
                   f"total energy {last['total_energy']:.6g} J; outputs in {result.output_dir}")
             print(f"{scene.name}: {describe_energy(report, scene)}")
+    return 0
+
+
+def _run_joint(args, scene, out: Path, cli_options: dict[str, str]) -> int:
+    """``fem-anim run`` of a scene with a shell body (:mod:`fem_anim.simulation.joint_run`)."""
+    from mpi4py import MPI
+
+    from fem_anim.output.provenance import software_versions
+    from fem_anim.simulation.energy_report import describe_energy
+    from fem_anim.simulation.interrupt import stop_at_once
+    from fem_anim.simulation.joint_run import run_joint
+
+    if args.resume is not None:
+        raise FemAnimError("--resume: a run with a shell body beside solids keeps no "
+                           "checkpoint yet: run it again")
+    quiet_jit_logging()
+    with stop_at_once():
+        rows, report = run_joint(scene, out, MPI.COMM_WORLD, cli_options, args.quiet,
+                                 {"versions": software_versions(MPI.COMM_WORLD)},
+                                 preset=args.solver)
+    if MPI.COMM_WORLD.rank == 0 and (not args.quiet or report["flagged"]):
+        last = rows[-1]
+        print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, total "
+              f"energy {last['total_energy']:.6g} J; outputs in {out}")
+        print(f"{scene.name}: {describe_energy(report, scene)}")
     return 0
 
 

@@ -196,7 +196,10 @@ def run(scene, outdir: str | Path | None = None, quiet: bool = True) -> Run:
     """Simulate a scene, write its run directory and return the finished :class:`Run`.
 
     Collective under MPI (every rank calls it with the same scene). The FFCx JIT's build
-    log is kept off the terminal (:func:`fem_anim.console.quiet_jit`).
+    log is kept off the terminal (:func:`fem_anim.console.quiet_jit`). A scene with a shell
+    ``[[body]]`` beside solids runs as ``fem-anim run`` runs it
+    (:mod:`fem_anim.simulation.joint_run`); the :class:`Run` then reads its
+    ``trajectory.h5``, the seen surface of both meshes.
 
     Args:
         scene: A :class:`~fem_anim.scene.loading.Scene`.
@@ -258,6 +261,16 @@ def run(scene, outdir: str | Path | None = None, quiet: bool = True) -> Run:
             if comm.rank == 0 else None
         owned = comm.bcast(owned, root=0)
         outdir = owned / "run"
+    from fem_anim.scene.joint_rules import shell_body
+
+    if shell_body(scene.data) is not None:  # a shell beside solids: two meshes, one step
+        from fem_anim.simulation.joint_run import run_joint
+
+        with quiet_jit():
+            run_joint(scene, Path(outdir), comm, quiet=quiet,
+                      provenance={"versions": software_versions(comm)})
+        comm.barrier()
+        return Run(Path(outdir), owned if comm.rank == 0 else None)
     with quiet_jit():
         sim = Simulation(scene, comm)
         initial = initial_energies(sim)

@@ -12,7 +12,7 @@ from conftest import ROOT, clean_environment, mpirun_command
 DEMOS = ["materials.py", "optimisation_basics.py", "harmonic_oscillator.py", "twisted_bar.py",
          "two_material_bar.py", "plate_2d.py", "imported_mesh.py", "jelly_cube.py",
          "incompressible_ball.py", "pile.py", "fit_material.py", "drape.py", "flag.py",
-         "throw_ball.py"]
+         "throw_ball.py", "drape_soft.py"]
 
 
 def test_every_demo_is_registered():

@@ -24,6 +24,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "tetra10_cells": "intersection",
     "surface_faces": "p2_surface",
     "IPCContact": "ipc",
+    "JointIPCContact": "joint_surface",
     "LaggedFriction": "lagged_friction",
     "rest_problem": "rest_check",
     "KEEP_FRACTION": "obstacles",

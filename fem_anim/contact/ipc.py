@@ -153,6 +153,13 @@ class IPCContact:
         self.part = SurfacePartition(self.comm, faces, X[local_faces], free, face_body,
                                      labels.astype(np.int64), X[:n_owned], start, end,
                                      bool(cfg["self"]))
+        self._start(body_names)
+
+    def _start(self, body_names: list[str]) -> None:
+        """The state every evaluation reads, the first halo, and the check of the surfaces
+        at rest, once ``part``, ``unknown_rows`` and ``unknown_global`` are set (collective;
+        :class:`~fem_anim.contact.joint_surface.JointIPCContact` shares it)."""
+        cfg = self.cfg
         self.timers = {"detection_s": 0.0, "barrier_s": 0.0, "ccd_s": 0.0, "exchange_s": 0.0}
         # adaptive: 0 until the first step sets it (initial energies: no pair between bodies)
         self.kappa = float(cfg["stiffness"]) if cfg["stiffness"] != "adaptive" else 0.0

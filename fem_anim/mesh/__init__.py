@@ -35,6 +35,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "MaterialSpec": "regions",
     "assign_materials": "regions",
     "local_cell_markers": "regions",
+    "JointLayout": "joint_layout",
     "build_shell_mesh": "shell_mesh",
     "check_shell_surface": "shell_mesh",
     "CELL_NAMES": "simplex",

@@ -24,6 +24,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "SchurPreconditioner": "mixed_space",
     "EVENTS": "events",
     "EnergyProblem": "objective",
+    "JointProblem": "joint_objective",
     "QuadratureData": "quadrature",
     "ShellEnergy": "shell_terms",
     "shell_measures": "shell_terms",

@@ -298,7 +298,8 @@ def render_frame(path: Path, points: np.ndarray, cells: np.ndarray, displacement
 
 def space_dim(cell_type: str, directory: Path) -> int:
     """The space dimension of a run's mesh: 3 for tetrahedra and for a shell's triangles (its
-    ``scene.json`` has a ``[shell]`` table: a surface in 3D), 2 for other triangles.
+    ``scene.json`` has a ``[shell]`` table, or a ``[[body]]`` one: a surface in 3D, alone or
+    seen with solids' boundaries), 2 for other triangles.
 
     Args:
         cell_type: meshio's cell type, ``"tetra"`` or ``"triangle"``.
@@ -310,7 +311,8 @@ def space_dim(cell_type: str, directory: Path) -> int:
         scene = json.loads((Path(directory) / "scene.json").read_text())["scene"]
     except (OSError, KeyError, ValueError):
         return 2
-    return 3 if "shell" in scene else 2
+    bodies = scene.get("body") or []
+    return 3 if "shell" in scene or any("shell" in b for b in bodies) else 2
 
 
 def render_vtu(vtu: Path, png: Path, title: str = "", settings: dict | None = None) -> None:

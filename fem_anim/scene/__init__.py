@@ -47,4 +47,9 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "validate_scene": "validation",
     "SHELL_MODELS": "shell_rules",
     "check_shell": "shell_rules",
+    "JOINT_INTEGRATORS": "joint_rules",
+    "check_joint": "joint_rules",
+    "check_joint_parts": "joint_rules",
+    "joint_parts": "joint_rules",
+    "shell_body": "joint_rules",
 })

@@ -17,6 +17,7 @@ from typing import Any
 
 from fem_anim.errors import SceneError, show_value
 from fem_anim.scene.contact_limits import check_contact_limits
+from fem_anim.scene.joint_rules import check_joint
 from fem_anim.scene.shell_rules import check_shell
 
 __all__ = ["check_consistency", "check_render", "HESSIAN_METHODS", "MAX_CELLS", "MIXED_MODELS",
@@ -174,6 +175,7 @@ def check_consistency(data: dict[str, Any]) -> None:
         SceneError: for the first rule broken, naming the keys and their values.
     """
     d = data["mesh"]["dim"]
+    check_joint(data)
     check_shell(data)
     if data["body"]:
         _check_bodies(data)

@@ -81,7 +81,7 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
     mixed = isinstance(element, dict) and element.get("formulation") == "mixed"
     keep_exact = mixed or solver.get("method", "newton") != "newton" or \
         solver.get("hessian_update", "every_iteration") != "every_iteration" or \
-        _several_models(raw) or "shell" in raw
+        _several_models(raw) or "shell" in raw or _shell_body(raw)
     if mixed:  # the saddle point needs ldlt, lu or schur (fem_anim.problem.mixed_space)
         solver.setdefault("preset", MIXED_DEFAULT_PRESET)
     if mode == "preview" and _has_contact(raw):  # converged steps (module docstring)
@@ -97,6 +97,14 @@ def apply_solver_mode(raw: dict[str, Any]) -> None:
             _fill_petsc(solver, value)
             continue
         solver.setdefault(key, value)
+
+
+def _shell_body(raw: dict[str, Any]) -> bool:
+    """Whether a ``[[body]]`` of the parsed scene has a ``shell`` table (its step takes the
+    exact Hessian: :mod:`fem_anim.scene.joint_rules`)."""
+    bodies = raw.get("body")
+    return isinstance(bodies, list) and any(isinstance(b, dict) and "shell" in b
+                                            for b in bodies)
 
 
 def _fill_petsc(solver: dict[str, Any], options: dict[str, Any]) -> None:

@@ -354,7 +354,8 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "initial": ("[initial]", "a rigid initial velocity (absent: at rest)"),
     "obstacle": ("[[obstacle]]", "static obstacles with barrier contact"),
     "body": ("[[body]]", "one of several bodies, with its own [body.mesh], [body.material], "
-             "[body.initial], [[body.pin]] and [[body.region]] (keys as at the top level)"),
+             "[body.initial], [[body.pin]] and [[body.region]] (keys as at the top level); "
+             "[body.shell] makes it a thin shell beside solid bodies"),
     "shell": ("[shell]", "a thin shell: the body is a triangle surface in 3D (mesh.shape = "
               "\"sheet\" or a surface file), its membrane and bending energies"),
     "wind": ("[wind]", "wind and aerodynamic drag on a [shell] (absent: none)"),
@@ -369,7 +370,7 @@ OPTIONAL_SECTIONS = ("gravity", "damping", "initial", "contact", "shell", "wind"
 #: Sections that are arrays of tables (``[[pin]]``, ``[[region]]``, ``[[obstacle]]``).
 ARRAY_SECTIONS = ("pin", "region", "obstacle")
 #: Sub-tables of a ``[[body]]``: the top-level sections that describe one body.
-BODY_TABLES = ("mesh", "material", "initial")
+BODY_TABLES = ("mesh", "material", "initial", "shell")
 BODY_ARRAYS = ("pin", "region")
 #: Keys without a default that a declared optional section must give.
 REQUIRED = {"gravity": ("acceleration",), "pin": ("min", "max"), "region": ("name",),

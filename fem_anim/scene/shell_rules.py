@@ -4,8 +4,9 @@ A shell is one body whose mesh is a triangle surface in 3D (``mesh.shape = "shee
 surface file), P1, with a membrane model of :mod:`fem_anim.forms.shell_membrane` and the
 hinge bending of :mod:`fem_anim.forms.shell_bending`, or P2 with the Kirchhoff-Love bending of
 :mod:`fem_anim.forms.shell_kirchhoff_love` (``shell.bending_model``; no contact or obstacles
-yet). What its energy does not have yet is
-refused here, one rule a line: several bodies and regions, ``[contact]`` without self
+yet). A shell beside solids is a ``[[body]]`` with a ``shell`` table
+(:mod:`fem_anim.scene.joint_rules`, whose shell part is checked here too). What its energy
+does not have yet is refused here, one rule a line: regions, ``[contact]`` without self
 contact (a shell scene has one body, so its only IPC pairs are the shell's own), obstacles
 with a consistent mass (the barrier's vertex rule must be the mass's), P2, the mixed
 formulation, stiffness-proportional damping, the Hessian filters of solids' ``psi(F)`` and
@@ -42,8 +43,6 @@ def _refuse(data: dict[str, Any]) -> str | None:
     mesh, element, material = data["mesh"], data["element"], data["material"]
     if mesh["dim"] != 3:
         return f"[shell] needs mesh.dim = 3 (a surface in 3D), got {mesh['dim']}"
-    if data["body"]:
-        return "[shell] with [[body]] is not supported: a shell scene has one body ([mesh])"
     if mesh["shape"] not in SHELL_SHAPES:
         return (f"[shell] needs mesh.shape = \"sheet\" or \"file\" (a triangle surface), got "
                 f"{mesh['shape']!r}")

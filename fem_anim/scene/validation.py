@@ -179,7 +179,7 @@ def _validate_bodies(raw: Mapping[str, Any]) -> list[dict[str, Any]]:
         own = {k: v for k, v in entry.items() if k not in BODY_TABLES + BODY_ARRAYS}
         body = validate_table("body", own, SCHEMA["body"], where)
         for section in BODY_TABLES:
-            if section == "initial" and section not in entry:
+            if section in ("initial", "shell") and section not in entry:
                 continue
             body[section] = validate_table(section, entry.get(section, {}), SCHEMA[section],
                                            f"{where}.{section}")

@@ -47,7 +47,7 @@ from fem_anim.mesh.checks import cell_volumes
 from fem_anim.problem.shell_terms import shell_thickness
 
 __all__ = ["energy_report", "initial_energies", "describe_energy", "write_summary",
-           "DAMPED_THRESHOLD", "ROUNDOFF_STRAIN", "AT_REST", "moving_pins"]
+           "DAMPED_THRESHOLD", "ROUNDOFF_STRAIN", "AT_REST", "moving_pins", "roundoff_energy"]
 
 #: A run that lost (gained) more than this fraction of the exchanged energy is flagged
 #: as damped (as gaining energy).
@@ -82,10 +82,15 @@ def initial_energies(sim) -> dict[str, float]:
     p.u.x.array[:] = state.u
     p.v.x.array[:] = state.v
     energies = p.energies()
-    young = sim.scene["material"]["youngs_modulus"]
-    energies["roundoff"] = young * _volume(sim.domain) * shell_thickness(sim.scene) * \
-        ROUNDOFF_STRAIN**2
+    energies["roundoff"] = roundoff_energy(sim.scene, sim.domain)
     return energies
+
+
+def roundoff_energy(scene, domain) -> float:
+    """E_Young |Omega| t ROUNDOFF_STRAIN^2 (J; t = 1 for a solid): the energy below which a
+    figure of this scene's body is round-off (collective)."""
+    young = scene["material"]["youngs_modulus"]
+    return young * _volume(domain) * shell_thickness(scene) * ROUNDOFF_STRAIN**2
 
 
 def energy_report(rows: list[dict], initial: dict[str, float], scene) -> dict:

@@ -37,6 +37,7 @@ from fem_anim.petsc_options import flatten_options, merge_options
 from fem_anim.problem.form_compiler import JIT_OPTIONS
 from fem_anim.problem.objective import EnergyProblem
 from fem_anim.scene.consistency import MIXED_PRESETS
+from fem_anim.scene.joint_rules import shell_body
 from fem_anim.simulation.energy_report import moving_pins
 from fem_anim.simulation.handle_work import handle_work
 from fem_anim.simulation.initial_state import initial_velocity
@@ -109,6 +110,10 @@ class Simulation:
     def __init__(self, scene, comm: MPI.Comm = MPI.COMM_WORLD,
                  cli_options: dict[str, str] | None = None, preset: str | None = None,
                  domain: SimplexMesh | None = None):
+        if shell_body(scene.data) is not None:
+            raise FemAnimError("a scene with a shell [[body]] beside solids is two meshes "
+                               "stepped together: run it with `fem-anim run` or fem_anim.run "
+                               "(fem_anim.simulation.JointSimulation from Python)")
         self.scene = scene
         self.comm = comm
         #: Wall time per phase (summary.json's ``wall``: :mod:`fem_anim.output.provenance`).

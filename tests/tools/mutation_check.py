@@ -1021,8 +1021,10 @@ MUTATIONS: list[Mutation] = [
               "test_a_shell_thicker_than_its_elements_apart_is_refused",),
              "a shell whose elements are nearer than its thickness at rest is accepted"),
     Mutation("render-shell-flat", "fem_anim/render/frames.py",
-             'return 3 if "shell" in scene else 2', "return 2",
-             ("tests/test_shell_contact.py::test_a_shell_run_is_drawn_in_3d",),
+             'return 3 if "shell" in scene or any("shell" in b for b in bodies) else 2',
+             "return 2",
+             ("tests/test_shell_contact.py::test_a_shell_run_is_drawn_in_3d",
+              "tests/test_shell_solid.py::test_a_shell_body_run_is_drawn_in_3d"),
              "a shell's triangles drawn as a 2D mesh (z dropped)"),
     Mutation("shell-extent-least", "fem_anim/mesh/bodies.py",
              "extent = float(spans.max() if shell else spans.min())",
@@ -1577,6 +1579,83 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_contact_distribution.py::test_distributed_contact_equals_serial",),
              "gradient rows of vertices owned by another rank are dropped instead of sent "
              "to their owner: a pair across two ranks pushes one side only"),
+    Mutation("joint-layout-shell-over-solid", "fem_anim/mesh/joint_layout.py",
+             "return self._rank_start[owner] + self._inside[owner, k] + blocks - first",
+             "return self._rank_start[owner] + blocks - first",
+             ("tests/test_shell_solid.py::test_joint_objective_is_the_parts_plus_the_barrier",),
+             "the shell's joint blocks start at the rank's first block instead of after its "
+             "solid blocks: the barrier reads and writes the solid's rows for the shell"),
+    Mutation("joint-barrier-unweighted", "fem_anim/problem/joint_objective.py",
+             "value += float(self.weight.value) * self.ipc.energy()",
+             "value += self.ipc.energy()",
+             ("tests/test_shell_solid.py::test_joint_objective_is_the_parts_plus_the_barrier",
+              "tests/test_shell_solid.py::test_joint_gradient_and_hessian_pass_a_taylor_test"),
+             "the joint objective adds kappa B without the weight w that its gradient and "
+             "Hessian carry: the line search judges another function than Newton's"),
+    Mutation("joint-hessian-half-barrier", "fem_anim/problem/joint_objective.py",
+             "self.ipc.add_hessian(A, float(self.weight.value))",
+             "self.ipc.add_hessian(A, 0.5 * float(self.weight.value))",
+             ("tests/test_shell_solid.py::test_joint_objective_is_the_parts_plus_the_barrier",
+              "tests/test_shell_solid.py::test_joint_gradient_and_hessian_pass_a_taylor_test"),
+             "the joint Hessian holds half the barrier's: not the derivative of the gradient"),
+    Mutation("joint-offset-dropped", "fem_anim/contact/joint_surface.py",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), float(offset)",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), 0.0",
+             ("tests/test_shell_solid.py::test_joint_objective_is_the_parts_plus_the_barrier",
+              "tests/test_shell_solid.py::test_cloth_falls_on_a_soft_cube_without_intersection"),
+             "the joint barrier keeps no thickness: the cloth's mid-surface may touch the "
+             "solid and layers of cloth each other"),
+    Mutation("joint-barrier-spares-the-solid", "fem_anim/problem/joint_objective.py",
+             "        self.ipc.add_gradient(barrier, float(self.weight.value))\n"
+             "        barrier.array[self._pinned_rows] = 0.0\n        b.axpy(1.0, barrier)",
+             "        self.ipc.add_gradient(barrier, float(self.weight.value))\n"
+             "        barrier.array[: self.layout.offsets[1]] = 0.0\n        b.axpy(1.0, barrier)",
+             ("tests/test_shell_solid.py::test_free_collision_keeps_the_total_momentum",),
+             "the barrier pushes the shell but not the solid (its rows of the joint gradient "
+             "dropped): no reaction, Newton's third law broken, the step does not converge"),
+    Mutation("joint-offset-dropped-drape", "fem_anim/contact/joint_surface.py",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), float(offset)",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), 0.0",
+             ("tests/test_shell_solid.py::test_cloth_falls_on_a_soft_cube_without_intersection",),
+             "the joint barrier keeps no thickness: the stepped cloth comes nearer the cube "
+             "than t"),
+    Mutation("joint-scene-shell-offset-dropped", "fem_anim/scene/joint_rules.py",
+             "mesh[\"origin\"] = [float(a + b) for a, b in zip(origin, body[\"offset\"])]",
+             "mesh[\"origin\"] = origin",
+             ("tests/test_shell_solid.py::"
+              "test_scene_file_with_a_shell_body_runs_intersection_free",),
+             "a shell body's offset is not applied to its sheet: the cloth is built inside "
+             "the cube"),
+    Mutation("joint-barrier-moves-pins", "fem_anim/problem/joint_objective.py",
+             "        barrier.array[self._pinned_rows] = 0.0\n        b.axpy(1.0, barrier)",
+             "        b.axpy(1.0, barrier)",
+             ("tests/test_shell_solid.py::"
+              "test_pinned_vertices_in_contact_stay_on_their_targets",),
+             "the barrier's gradient is added to the pinned rows, whose residual is x - u_bc: "
+             "a pinned vertex in contact is pushed off its target"),
+    Mutation("joint-parts-staged-with-another-weight", "fem_anim/problem/joint_objective.py",
+             "            part.stage(u0, y, weight, t, h, d)",
+             "            part.stage(u0, y, weight * (1.0 + 1e-3), t, h, d)",
+             ("tests/test_shell_solid.py::"
+              "test_bodies_apart_step_as_their_own_runs[implicit_euler]",),
+             "the parts' step objectives get another weight w than the scheme's: the joint "
+             "step is not the bodies' implicit step even where they do not touch"),
+    Mutation("joint-baij-preallocated-per-scalar-row", "fem_anim/problem/joint_objective.py",
+             "pairs = np.unique(np.stack([np.concatenate(rows) // b, np.concatenate(cols) // b]),",
+             "pairs = np.unique(np.stack([np.concatenate(rows), np.concatenate(cols)]),",
+             ("tests/test_shell_solid.py::test_block_storage_solves_the_joint_step",),
+             "the block matrix is preallocated with scalar rows' counts: PETSc refuses it"),
+    Mutation("joint-api-run-not-dispatched", "fem_anim/runs.py",
+             "    if shell_body(scene.data) is not None:  # a shell beside solids",
+             "    if False:  # a shell beside solids",
+             ("tests/test_shell_solid.py::test_python_api_runs_a_shell_body_scene",),
+             "fem_anim.run hands a scene with a shell body to the one-mesh Simulation"),
+    Mutation("joint-offset-dropped-fold", "fem_anim/contact/joint_surface.py",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), float(offset)",
+             "self.dhat, self.offset = float(cfg[\"dhat\"]), 0.0",
+             ("tests/test_shell_solid.py::test_cloth_lands_on_itself_beside_a_solid",),
+             "the joint barrier keeps no thickness: two layers of the cloth lying on each "
+             "other come nearer than t"),
 ]
 
 
