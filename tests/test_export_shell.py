@@ -305,6 +305,12 @@ def test_unreadable_runs_are_one_line(drape, soft, tmp_path, capsys):
         del h5["data1"]
         h5["data1"] = tets[1:]
     assert "solids.h5" in one_line_error(capsys, ["export", str(other)])
+    edited = tmp_path / "edited"  # a hand-edited scene.json: a sphere without its radius
+    shutil.copytree(drape, edited)
+    data = json.loads((edited / "scene.json").read_text())
+    del data["scene"]["obstacle"][0]["radius"]
+    (edited / "scene.json").write_text(json.dumps(data))
+    assert "radius" in one_line_error(capsys, ["export", str(edited)])
 
 
 @pytest.mark.slow

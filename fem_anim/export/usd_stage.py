@@ -177,9 +177,9 @@ def write_usd(run: RunData, path: Path, start_frame: int = 1) -> None:
             np.ascontiguousarray(surface.triangles.ravel(), dtype=np.int32)))
         mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        primvars = UsdGeom.PrimvarsAPI(mesh)
         if surface.body in run.shells:  # a cloth: no inside, both faces seen
             mesh.CreateDoubleSidedAttr(True)
-        primvars = UsdGeom.PrimvarsAPI(mesh)
         primvars.CreatePrimvar("body", Sdf.ValueTypeNames.Int, UsdGeom.Tokens.constant) \
             .Set(surface.body)
         energy = primvars.CreatePrimvar("energy_density", Sdf.ValueTypeNames.FloatArray,

@@ -1656,6 +1656,38 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_solid.py::test_cloth_lands_on_itself_beside_a_solid",),
              "the joint barrier keeps no thickness: two layers of the cloth lying on each "
              "other come nearer than t"),
+    Mutation("shell-export-one-sided", "fem_anim/export/usd_stage.py",
+             "            mesh.CreateDoubleSidedAttr(True)",
+             "            pass",
+             ("tests/test_export_shell.py::test_shell_usd_is_the_trajectory_at_every_frame",),
+             "a cloth exported without doubleSided: renderers that cull back faces lose half "
+             "of it"),
+    Mutation("shell-export-energy-unit", "fem_anim/export/run_reader.py",
+             'return "J/m^2" if body in self.shells or self.dim == 2 else "J/m^3"',
+             'return "J/m^3"',
+             ("tests/test_export_shell.py::test_shell_usd_is_the_trajectory_at_every_frame",),
+             "a shell's energy density (per area) labelled J/m^3"),
+    Mutation("joint-export-sorted-winding", "fem_anim/export/run_reader.py",
+             "    out[on_solid] = faces[match]\n",
+             "    out[on_solid] = triangles[on_solid]\n",
+             ("tests/test_export_shell.py::test_joint_run_exports_the_solid_and_the_cloth",),
+             "a joint run's solid exported with the seen surface's sorted (unwound) triangles"),
+    Mutation("joint-export-body-order", "fem_anim/export/run_reader.py",
+             "body[on_solid] = np.asarray(solid_numbers)[solid_body[owner[match]]]",
+             "body[on_solid] = solid_body[owner[match]]",
+             ("tests/test_export_shell.py::test_joint_body_numbers_follow_the_scene",),
+             "a joint run's solids numbered in the solids' mesh, not in the scene's [[body]] "
+             "order"),
+    Mutation("shell-export-winding-reversed", "fem_anim/export/boundary.py",
+             "        return cells.copy(), np.arange(cells.shape[0])",
+             "        return cells[:, [0, 2, 1]], np.arange(cells.shape[0])",
+             ("tests/test_export_shell.py::test_p2_shell_exports_its_quadratic_field_refined",),
+             "a shell's triangles exported against its mesh's winding: normals flipped"),
+    Mutation("export-traceback", "fem_anim/export/export_command.py",
+             "        except (ValueError, KeyError, IndexError, TypeError) as err:",
+             "        except FemAnimError as err:",
+             ("tests/test_export_shell.py::test_unreadable_runs_are_one_line",),
+             "a run the exporter cannot handle ends in a Python traceback"),
 ]
 
 
