@@ -271,6 +271,34 @@ def test_joint_body_numbers_follow_the_scene(soft, tmp_path):
     assert np.all(surfaces[1].vertices < num_solid)
 
 
+@pytest.mark.mpi
+def test_joint_usd_of_a_parallel_run_is_the_serial_one(soft, tmp_path):
+    """Under ``mpirun -n 2`` the joint run writes the same stage: faces and samples."""
+    import subprocess
+
+    from conftest import clean_environment, fem_anim_command, mpirun_command
+
+    mpirun = mpirun_command(2)
+    if mpirun is None:
+        pytest.skip("no mpirun")
+    out = tmp_path / "run"
+    args = ["run", str(ROOT / "demos" / "drape_soft.toml"), "-o", str(out), "--quiet"]
+    for setting in SOFT_SETS:
+        args += ["--set", setting]
+    done = subprocess.run(mpirun + fem_anim_command() + args, capture_output=True, text=True,
+                          timeout=600, env=clean_environment())
+    assert done.returncode == 0, done.stderr[-2000:]
+    serial, parallel = (Usd.Stage.Open(str(p / "drape_soft.usdc")) for p in (soft, out))
+    for name in ("jelly", "cloth"):
+        a, ta = usd_mesh(serial, f"/drape_soft/{name}")
+        b, tb = usd_mesh(parallel, f"/drape_soft/{name}")
+        assert np.array_equal(ta, tb)
+        for code in (1.0, 3.0):
+            xa = np.asarray(a.GetPointsAttr().Get(code))
+            xb = np.asarray(b.GetPointsAttr().Get(code))
+            assert np.allclose(xa, xb, rtol=0, atol=1e-6 * np.abs(xa).max())
+
+
 def one_line_error(capsys, args) -> str:
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
