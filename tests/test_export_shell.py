@@ -148,7 +148,7 @@ def test_shell_usd_is_the_trajectory_at_every_frame(drape):
     ball = UsdGeom.Sphere(stage.GetPrimAtPath("/drape/obstacles/ball"))
     world = UsdGeom.Xformable(ball).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
     assert list(world.ExtractTranslation()) == pytest.approx([0.0, 0.0, 0.12])
-    ground, _ = UsdGeom.Mesh(stage.GetPrimAtPath("/drape/obstacles/ground")), None
+    ground = UsdGeom.Mesh(stage.GetPrimAtPath("/drape/obstacles/ground"))
     quad = np.asarray(ground.GetPointsAttr().Get())
     assert np.allclose(quad[:, 2], 0.0)
 

@@ -78,8 +78,9 @@ class RunData:
     shells: frozenset[int] = frozenset()
 
     def energy_unit(self, body: int) -> str:
-        """The unit of a body's energy density: J/m^2 for a shell, J/m^3 (J/m^2 in 2D) else."""
-        return "J/m^2" if body in self.shells or self.dim == 2 else "J/m^3"
+        """The unit of a body's energy density: J/m^2 for a shell (per mid-surface area),
+        J/m^3 for a solid (a 2D run's too: per unit of depth)."""
+        return "J/m^2" if body in self.shells else "J/m^3"
 
     def displacement(self, frame: int) -> np.ndarray:
         """Vertex displacements of one frame ``(v, 3)`` (m)."""

@@ -1663,7 +1663,7 @@ MUTATIONS: list[Mutation] = [
              "a cloth exported without doubleSided: renderers that cull back faces lose half "
              "of it"),
     Mutation("shell-export-energy-unit", "fem_anim/export/run_reader.py",
-             'return "J/m^2" if body in self.shells or self.dim == 2 else "J/m^3"',
+             'return "J/m^2" if body in self.shells else "J/m^3"',
              'return "J/m^3"',
              ("tests/test_export_shell.py::test_shell_usd_is_the_trajectory_at_every_frame",),
              "a shell's energy density (per area) labelled J/m^3"),
