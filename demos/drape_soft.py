@@ -25,11 +25,11 @@
 # The demo asserts its physics on the frames read back from disk: in no frame does a
 # triangle of the cloth cross a boundary triangle of the block or another triangle of the
 # cloth, nor does a vertex of the cloth lie inside the block (the independent numpy check of
-# `fem_anim/contact/intersection.py` on both meshes together), no vertex of either body comes closer to the ground than it may, the cloth
-# lies on the block (its highest point t above the block's top) and the block carries it
-# (its top sinks). The scene is `demos/drape_soft.toml` (`fem-anim run
-# demos/drape_soft.toml`). Set FEM_ANIM_DEMO_REDUCED=1 for the short, coarse variant the
-# test suite runs.
+# `fem_anim/contact/intersection.py` on both meshes together), no vertex of either body
+# comes closer to the ground than it may, the cloth lies on the block (its highest point t
+# above the block's top) and the block carries it (its top sinks). The scene is
+# `demos/drape_soft.toml` (`fem-anim run demos/drape_soft.toml`). Set
+# FEM_ANIM_DEMO_REDUCED=1 for the short, coarse variant the test suite runs.
 
 # %%
 import os
