@@ -3,7 +3,8 @@
 The collision-free start of each step (u_n + alpha (y - u_n), alpha the CCD's step bound:
 :func:`fem_anim.simulation.newton_start.collision_free_guess` for one mesh,
 ``JointSimulation._collision_free_start`` for a shell beside a solid) is what keeps a body
-from tunnelling: if the predictor y lies wholly inside another body, more than d_hat from
+from tunnelling: if the predictor y (seed Section 3.1, the y of eq. 3; x_n + h v_n for
+implicit Euler without gravity) lies wholly inside another body, more than d_hat from
 its faces, the step objective there is finite (a rigid translation, no pair within d_hat)
 and Newton would start, and stay, inside. No surface crosses another then, so only the
 independent check's enclosure test (:func:`fem_anim.contact.intersection.enclosed_vertices`)

@@ -17,6 +17,21 @@ count as zero. It takes any triangle soup, so a sheet and a solid's boundary tri
 (both ends of every edge on the other's plane) are not reported: the check is for crossings,
 which contact keeps the shell's thickness away from.
 
+A body wholly inside another crosses nothing (it tunnelled through a face within one step,
+or a thin body was thrown into a solid), so the check also asks whether a vertex lies
+strictly inside another body (:func:`enclosed_vertices`): the boundary triangles fall into
+connected pieces, oriented here from the soup alone (:func:`surface_components`); each
+closed piece is a solid's surface, and the generalised winding number of it
+(:func:`winding_numbers`: Jacobson, Kavan and Sorkine-Hornung 2013, solid angles by van
+Oosterom and Strackee 1983) at the other pieces' vertices within its bounding box is 1
+inside, 0 outside. The seed poses each step as a minimisation (Section 3.1, eq. 4) and has
+no contact; the IPC barrier added to it is defined on intersection-free states only, and
+IPC's continuous collision detection (not in the seed) keeps every start and iterate
+there: this check verifies that outcome, no surface crossing another and no body inside
+another.
+:func:`crossed_frames` asks both of a solid mesh's frames; :func:`intersecting` asks both
+of a soup (a solid's boundary triangles stacked with a sheet).
+
 Quadratic tetrahedra (10 nodes, VTK's ``tetra10`` order: the 4 vertices, then the nodes on
 the edges 01, 12, 02, 03, 13, 23) are checked on their boundary triangles split in four at
 the edge nodes (the contact surface of :mod:`fem_anim.contact.p2_surface`, built here from
@@ -289,6 +304,8 @@ def enclosed_vertices(x: np.ndarray, triangles: np.ndarray, components=None) -> 
         The indices of the enclosed vertices (sorted; empty: none).
     """
     oriented, piece, closed = components or surface_components(triangles)
+    if not closed.any():
+        return np.empty(0, np.int64)
     used = np.unique(oriented)
     tol = 1e-10 * float(np.linalg.norm(np.ptp(x[used], axis=0)))
     found = []
