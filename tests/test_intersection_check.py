@@ -136,3 +136,28 @@ def test_a_sheet_inside_a_cube_is_found_and_one_resting_on_it_is_not():
     assert len(crossing_pairs(x, soup)) == 0
     assert np.all(enclosed_vertices(x, soup) >= len(cube_points))
     assert len(enclosed_vertices(x, soup)) == len(sheet_points)
+
+
+def test_only_vertices_in_a_bodys_bounding_box_get_its_winding_number(monkeypatch):
+    """The bounding-box prefilter keeps large frames cheap: for a small box 1 mm beside a
+    big one no winding number is evaluated at all; lowered 0.1 into the big one's top, only
+    its 4 bottom vertices (in the big box's box) and the big box's vertex at the centre of
+    its top face (in the small box's box) are, and all 5 are inside the other body."""
+    from fem_anim.contact import intersection
+
+    evaluated = []
+    real = intersection.winding_numbers
+
+    def spy(x, triangles, q):
+        evaluated.append(len(q))
+        return real(x, triangles, q)
+
+    monkeypatch.setattr(intersection, "winding_numbers", spy)
+    points, cells = _boxes((1.001, 0.4, 0.4))
+    assert len(enclosed_vertices(points, boundary_triangles(cells))) == 0
+    assert sum(evaluated) == 0
+    points, cells = _boxes((0.4, 0.4, 0.9))  # 0.9 < z < 1.1: half in the big box
+    found = enclosed_vertices(points, boundary_triangles(cells))
+    assert sorted(evaluated) == [1, 4] and len(found) == 5
+    assert np.allclose(points[found], [[0.5, 0.5, 1.0]] + [[a, b, 0.9] for a in (0.4, 0.6)
+                                                           for b in (0.4, 0.6)])

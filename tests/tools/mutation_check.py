@@ -1699,6 +1699,13 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_intersection_check.py::"
               "test_a_box_inside_a_box_is_found_and_one_outside_is_not[1]",),
              "a vertex on the surface (touching) with |w| > 1/2 counts as inside"),
+    Mutation("inside-bbox-prefilter-dropped", "fem_anim/contact/intersection.py",
+             "q = others[np.all((x[others] >= lo) & (x[others] <= hi), axis=1)]",
+             "q = others",
+             ("tests/test_intersection_check.py::"
+              "test_only_vertices_in_a_bodys_bounding_box_get_its_winding_number",),
+             "every vertex gets every body's winding number: right answers, cost grows as "
+             "vertices x triangles"),
 ]
 
 
