@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from fem_anim.contact.intersection import (boundary_triangles, crossed_frames, crossing_pairs,
-                                           enclosed_vertices, intersecting, surface_components,
-                                           winding_numbers)
+                                           enclosed_vertices, intersecting, solid_bodies,
+                                           surface_components, winding_numbers)
 from fem_anim.meshes.sheet import structured_sheet
 from fem_anim.meshes.structured import structured_box
 
@@ -161,3 +161,30 @@ def test_only_vertices_in_a_bodys_bounding_box_get_its_winding_number(monkeypatc
     assert sorted(evaluated) == [1, 4] and len(found) == 5
     assert np.allclose(points[found], [[0.5, 0.5, 1.0]] + [[a, b, 0.9] for a in (0.4, 0.6)
                                                            for b in (0.4, 0.6)])
+
+
+def _hollow_box():
+    """A unit box of 5^3 Kuhn cubes with the middle cube (0.4 < x, y, z < 0.6) left out:
+    two closed pieces of one body, the outer surface and the cavity's."""
+    points, cells = structured_box([1.0, 1.0, 1.0], [5, 5, 5])
+    middle = np.all(np.abs(points[cells].mean(axis=1) - 0.5) < 0.1, axis=1)
+    return points, cells[~middle]
+
+
+def test_a_body_in_a_cavity_is_outside_and_one_in_the_material_is_inside():
+    """The cavity's surface lies inside the body's outer surface: grouped into one body by
+    the cells (:func:`solid_bodies`, outer piece outward, cavity inward) it encloses nothing,
+    and a small box in the cavity is not inside the body; the same box in the material
+    (0.05 to 0.15 from the corner, crossing no face) is."""
+    points, cells = _hollow_box()
+    F = boundary_triangles(cells)
+    components = surface_components(F)
+    assert components[2].tolist() == [True, True]
+    assert solid_bodies(cells, F, components[1]).tolist() == [0, 0]
+    assert crossed_frames(points, cells, [np.zeros_like(points)]) == []
+    assert len(enclosed_vertices(points, F)) > 0  # pieces taken apart: the cavity is "in"
+    small_points, small_cells = structured_box([0.1, 0.1, 0.1], [1, 1, 1])
+    for shift, inside in (((0.45, 0.45, 0.45), False), ((0.05, 0.05, 0.05), True)):
+        x = np.concatenate([points, small_points + shift])
+        both = np.concatenate([cells, small_cells + len(points)])
+        assert (crossed_frames(x, both, [np.zeros_like(x)]) == [0]) == inside

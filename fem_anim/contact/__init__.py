@@ -22,6 +22,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "intersecting": "intersection",
     "is_shell": "contact_surface",
     "surface_entities": "contact_surface",
+    "solid_bodies": "intersection",
     "surface_collision_mesh": "intersection",
     "surface_components": "intersection",
     "tetra10_cells": "intersection",

@@ -20,11 +20,12 @@ which contact keeps the shell's thickness away from.
 A body wholly inside another crosses nothing (it tunnelled through a face within one step,
 or a thin body was thrown into a solid), so the check also asks whether a vertex lies
 strictly inside another body (:func:`enclosed_vertices`): the boundary triangles fall into
-connected pieces, oriented here from the soup alone (:func:`surface_components`); each
-closed piece is a solid's surface, and the generalised winding number of it
-(:func:`winding_numbers`: Jacobson, Kavan and Sorkine-Hornung 2013, solid angles by van
-Oosterom and Strackee 1983) at the other pieces' vertices within its bounding box is 1
-inside, 0 outside. The seed poses each step as a minimisation (Section 3.1, eq. 4) and has
+connected pieces, oriented here from the soup alone (:func:`surface_components`); the
+closed pieces bound solids (grouped into bodies by the cells' connectivity,
+:func:`solid_bodies`: an outer surface and its cavities), and the generalised winding
+number of a body's pieces oriented outward (:func:`winding_numbers`: Jacobson, Kavan and
+Sorkine-Hornung 2013, solid angles by van Oosterom and Strackee 1983) at the other bodies'
+vertices within its bounding box is 1 in its material, 0 outside and in a cavity. The seed poses each step as a minimisation (Section 3.1, eq. 4) and has
 no contact; the IPC barrier added to it is defined on intersection-free states only, and
 IPC's continuous collision detection (not in the seed) keeps every start and iterate
 there: this check verifies that outcome, no surface crossing another and no body inside
@@ -45,8 +46,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["boundary_triangles", "crossed_frames", "crossing_pairs", "enclosed_vertices",
-           "intersecting", "surface_collision_mesh", "surface_components", "tetra10_cells",
-           "winding_numbers"]
+           "intersecting", "solid_bodies", "surface_collision_mesh", "surface_components",
+           "tetra10_cells", "winding_numbers"]
 
 #: Rows of the triangles compared at once in :func:`crossing_pairs` (bounds the memory).
 CHUNK = 256
@@ -282,23 +283,43 @@ def _point_triangle_distances(p: np.ndarray, a: np.ndarray, b: np.ndarray,
     return np.where(inside, np.abs(height), edge)
 
 
-def enclosed_vertices(x: np.ndarray, triangles: np.ndarray, components=None) -> np.ndarray:
-    """Vertices of a triangle soup strictly inside a closed piece they are not part of.
+def _outward(x: np.ndarray, triangles: np.ndarray, piece: np.ndarray) -> np.ndarray:
+    """The closed pieces of one body oriented outward from its material: the piece of the
+    largest enclosed volume (the outer surface) to a positive signed volume, the others
+    (cavities, inside it) to a negative one, so their winding numbers sum to 1 in the
+    material and 0 in a cavity."""
+    _, local = np.unique(piece, return_inverse=True)
+    a, b, c = (x[triangles[:, i]] for i in range(3))
+    volume = np.bincount(local, weights=np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0)
+    outer = np.argmax(np.abs(volume))
+    sign = np.where(np.arange(volume.size) == outer, 1.0, -1.0) * np.sign(volume)
+    out = triangles.copy()
+    flip = sign[local] < 0
+    out[flip] = triangles[flip][:, [0, 2, 1]]
+    return out
+
+
+def enclosed_vertices(x: np.ndarray, triangles: np.ndarray, components=None,
+                      bodies=None) -> np.ndarray:
+    """Vertices of a triangle soup strictly inside a body they are not part of.
 
     A body wholly inside another (tunnelled through its surface, or a thin body passed
     into it) has no crossing for :func:`crossing_pairs` to find; its vertices are inside the
-    other's closed surface. For each closed piece (:func:`surface_components`) the vertices
-    of the other pieces within its bounding box get the piece's winding number
-    (:func:`winding_numbers`); a vertex is enclosed when |w| > 1/2 and its distance to the
-    piece is above 1e-10 of the scene's size (a vertex on the surface, touching, is not
-    inside; a crossing there is :func:`crossing_pairs`' to find). Every closed piece is
-    taken as a solid's surface (a shell is open); a body with an inner cavity would report a
-    vertex in the cavity (its inner surface is a closed piece of its own).
+    other's closed surface. A body is bounded by closed pieces (:func:`surface_components`):
+    by default each closed piece is a body of its own; ``bodies`` groups them (an outer
+    surface with its cavities: :func:`crossed_frames` groups by the tetrahedra's
+    connectivity). For each body the vertices of the other pieces within its bounding box
+    get the winding number of its pieces oriented outward (:func:`winding_numbers`: 1 in its
+    material, 0 outside and in a cavity); a vertex is enclosed when |w| > 1/2 and its
+    distance to the body's surface is above 1e-10 of the scene's size (a vertex on the
+    surface, touching, is not inside; a crossing there is :func:`crossing_pairs`' to find).
+    An open piece (a shell) contains nothing; its vertices are tested.
 
     Args:
         x: Vertex positions, (vertices, 3).
         triangles: (triangles, 3) vertex indices.
         components: :func:`surface_components` of ``triangles``, if already at hand.
+        bodies: The body of each piece, (pieces,) ints (default: each piece its own).
 
     Returns:
         The indices of the enclosed vertices (sorted; empty: none).
@@ -306,14 +327,16 @@ def enclosed_vertices(x: np.ndarray, triangles: np.ndarray, components=None) -> 
     oriented, piece, closed = components or surface_components(triangles)
     if not closed.any():
         return np.empty(0, np.int64)
+    body = np.arange(closed.size) if bodies is None else np.asarray(bodies)
     used = np.unique(oriented)
     tol = 1e-10 * float(np.linalg.norm(np.ptp(x[used], axis=0)))
     found = []
-    for k in np.flatnonzero(closed):
-        mine = oriented[piece == k]
+    for b in np.unique(body[closed]):
+        keep = closed[piece] & (body[piece] == b)
+        mine = _outward(x, oriented[keep], piece[keep])
         corners = x[mine]
         lo, hi = corners.min(axis=(0, 1)) - tol, corners.max(axis=(0, 1)) + tol
-        others = np.setdiff1d(used, mine, assume_unique=False)
+        others = np.setdiff1d(used, oriented[body[piece] == b])
         q = others[np.all((x[others] >= lo) & (x[others] <= hi), axis=1)]
         if q.size == 0:
             continue
@@ -327,7 +350,8 @@ def enclosed_vertices(x: np.ndarray, triangles: np.ndarray, components=None) -> 
     return np.unique(np.concatenate(found)) if found else np.empty(0, np.int64)
 
 
-def intersecting(x: np.ndarray, triangles: np.ndarray, components=None) -> bool:
+def intersecting(x: np.ndarray, triangles: np.ndarray, components=None,
+                 bodies=None) -> bool:
     """Whether a triangle soup has an intersection: a crossing (:func:`crossing_pairs`) or
     a vertex strictly inside another piece's closed surface (:func:`enclosed_vertices`).
 
@@ -335,9 +359,10 @@ def intersecting(x: np.ndarray, triangles: np.ndarray, components=None) -> bool:
         x: Vertex positions, (vertices, 3).
         triangles: (triangles, 3) vertex indices.
         components: :func:`surface_components` of ``triangles``, if already at hand.
+        bodies: The body of each piece (:func:`enclosed_vertices`).
     """
     return bool(len(crossing_pairs(x, triangles))
-                or len(enclosed_vertices(x, triangles, components)))
+                or len(enclosed_vertices(x, triangles, components, bodies)))
 
 
 def crossed_frames(points: np.ndarray, cells: np.ndarray, frames) -> list[int]:
@@ -362,9 +387,36 @@ def crossed_frames(points: np.ndarray, cells: np.ndarray, frames) -> list[int]:
     rest = mesh.rest_positions
     F = boundary_triangles(cells)
     components = surface_components(F)
+    bodies = solid_bodies(cells, F, components[1])
     return [k for k, u in enumerate(frames)
             if ipctk.has_intersections(mesh, np.asfortranarray(rest + u[used]))
-            or len(enclosed_vertices(points + u, F, components))]
+            or len(enclosed_vertices(points + u, F, components, bodies))]
+
+
+def solid_bodies(cells: np.ndarray, triangles: np.ndarray, piece: np.ndarray) -> np.ndarray:
+    """The body of each piece of a tetrahedral mesh's boundary: pieces whose cells are
+    connected (share a vertex) are one body (an outer surface and its cavities).
+
+    Args:
+        cells: The tetrahedra, (cells, 4) or (cells, 10).
+        triangles: Their :func:`boundary_triangles`.
+        piece: The piece of each triangle (:func:`surface_components`).
+
+    Returns:
+        (pieces,) body labels.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    corners = np.asarray(cells, dtype=np.int64)
+    n = int(corners.max()) + 1
+    rows = np.repeat(corners[:, 0], corners.shape[1])
+    _, vertex_body = connected_components(
+        coo_matrix((np.ones(rows.size), (rows, corners.ravel())), shape=(n, n)),
+        directed=False)
+    body = np.zeros(int(piece.max()) + 1 if piece.size else 0, np.int64)
+    body[piece] = vertex_body[np.asarray(triangles)[:, 0]]
+    return body
 
 
 def surface_collision_mesh(points: np.ndarray, cells: np.ndarray):

@@ -1669,14 +1669,14 @@ MUTATIONS: list[Mutation] = [
              "the joint step starts at the predictor whatever the CCD says: a small cloth "
              "thrown fast starts, and stays, wholly inside the cube"),
     Mutation("inside-check-solids-ignored", "fem_anim/contact/intersection.py",
-             "            or len(enclosed_vertices(points + u, F, components))]",
+             "            or len(enclosed_vertices(points + u, F, components, bodies))]",
              "            or False]",
              ("tests/test_intersection_check.py::"
               "test_a_box_inside_a_box_is_found_and_one_outside_is_not[1]",
               "tests/test_tunnelling.py::test_a_small_box_thrown_into_a_big_one_stays_outside"),
              "crossed_frames asks ipctk only: a box wholly inside another passes"),
     Mutation("inside-check-soup-ignored", "fem_anim/contact/intersection.py",
-             "or len(enclosed_vertices(x, triangles, components)))",
+             "or len(enclosed_vertices(x, triangles, components, bodies)))",
              "or False)",
              ("tests/test_intersection_check.py::"
               "test_a_sheet_inside_a_cube_is_found_and_one_resting_on_it_is_not",),
@@ -1706,6 +1706,19 @@ MUTATIONS: list[Mutation] = [
               "test_only_vertices_in_a_bodys_bounding_box_get_its_winding_number",),
              "every vertex gets every body's winding number: right answers, cost grows as "
              "vertices x triangles"),
+    Mutation("inside-cavity-bodies-ignored", "fem_anim/contact/intersection.py",
+             "bodies = solid_bodies(cells, F, components[1])", "bodies = None",
+             ("tests/test_intersection_check.py::"
+              "test_a_body_in_a_cavity_is_outside_and_one_in_the_material_is_inside",),
+             "each closed piece is a body: a hollow body's cavity surface is inside its outer "
+             "surface, every frame of it is reported"),
+    Mutation("inside-cavity-sign-lost", "fem_anim/contact/intersection.py",
+             "sign = np.where(np.arange(volume.size) == outer, 1.0, -1.0) * np.sign(volume)",
+             "sign = np.sign(volume)",
+             ("tests/test_intersection_check.py::"
+              "test_a_body_in_a_cavity_is_outside_and_one_in_the_material_is_inside",),
+             "a cavity oriented like the outer surface: w = 2 in the cavity, a body resting "
+             "there is reported"),
 ]
 
 
