@@ -28,8 +28,8 @@ Sorkine-Hornung 2013, solid angles by van Oosterom and Strackee 1983) at the oth
 vertices within its bounding box is 1 in its material, 0 outside and in a cavity. The
 seed poses each step as a minimisation (Section 3.1, eq. 4) and has no contact; the IPC
 barrier added to it is defined on intersection-free states only, and IPC's continuous
-collision detection (not in the seed) keeps every start and iterate there: this check verifies that outcome, no surface crossing another and no body inside
-another.
+collision detection (not in the seed) keeps every start and iterate there: this check
+verifies that outcome, no surface crossing another and no body inside another.
 :func:`crossed_frames` asks both of a solid mesh's frames; :func:`intersecting` asks both
 of a soup (a solid's boundary triangles stacked with a sheet).
 
