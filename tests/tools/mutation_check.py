@@ -1688,6 +1688,69 @@ MUTATIONS: list[Mutation] = [
              "        except FemAnimError as err:",
              ("tests/test_export_shell.py::test_unreadable_runs_are_one_line",),
              "a run the exporter cannot handle ends in a Python traceback"),
+    # -- the independent check sees a body inside another (inside-check) -------------------
+    Mutation("tunnel-solid-ccd-ignored", "fem_anim/simulation/newton_start.py",
+             "alpha = p.ipc.step_bound(u_last - target)", "alpha = 1.0",
+             ("tests/test_tunnelling.py::test_a_small_box_thrown_into_a_big_one_stays_outside",),
+             "Newton starts at the predictor whatever the CCD says: a small box thrown fast "
+             "starts, and stays, wholly inside a bigger one (no crossing to see)"),
+    Mutation("tunnel-joint-ccd-ignored", "fem_anim/simulation/joint_loop.py",
+             "alpha = p.ipc.step_bound(p.joint_array([s.u - y for s, y in zip(states, targets)]))",
+             "alpha = 1.0",
+             ("tests/test_tunnelling.py::test_a_small_cloth_thrown_into_a_cube_stays_outside",),
+             "the joint step starts at the predictor whatever the CCD says: a small cloth "
+             "thrown fast starts, and stays, wholly inside the cube"),
+    Mutation("inside-check-solids-ignored", "fem_anim/contact/intersection.py",
+             "            or len(enclosed_vertices(points + u, F, components, bodies))]",
+             "            or False]",
+             ("tests/test_intersection_check.py::"
+              "test_a_box_inside_a_box_is_found_and_one_outside_is_not[1]",
+              "tests/test_tunnelling.py::test_a_small_box_thrown_into_a_big_one_stays_outside"),
+             "crossed_frames asks ipctk only: a box wholly inside another passes"),
+    Mutation("inside-check-soup-ignored", "fem_anim/contact/intersection.py",
+             "or len(enclosed_vertices(x, triangles, components, bodies)))",
+             "or False)",
+             ("tests/test_intersection_check.py::"
+              "test_a_sheet_inside_a_cube_is_found_and_one_resting_on_it_is_not",),
+             "intersecting looks for crossings only: a sheet wholly inside a cube passes"),
+    Mutation("inside-winding-threshold", "fem_anim/contact/intersection.py",
+             "q = q[np.abs(winding_numbers(x, mine, x[q])) > 0.5]",
+             "q = q[np.abs(winding_numbers(x, mine, x[q])) > 1.5]",
+             ("tests/test_intersection_check.py::"
+              "test_a_box_inside_a_box_is_found_and_one_outside_is_not[2]",),
+             "no winding number passes the threshold: nothing is ever inside"),
+    Mutation("inside-orientation-lost", "fem_anim/contact/intersection.py",
+             "oriented[flipped] = tri[flipped][:, [0, 2, 1]]",
+             "oriented[flipped] = tri[flipped]",
+             ("tests/test_intersection_check.py::"
+              "test_the_winding_number_is_one_inside_whatever_the_triangle_order",),
+             "the sorted boundary triangles are not reoriented: the winding number is garbage"),
+    Mutation("inside-on-surface-counted", "fem_anim/contact/intersection.py",
+             "found.append(q[start:start + step][d > tol])",
+             "found.append(q[start:start + step])",
+             ("tests/test_intersection_check.py::"
+              "test_a_box_inside_a_box_is_found_and_one_outside_is_not[1]",),
+             "a vertex on the surface (touching) with |w| > 1/2 counts as inside"),
+    Mutation("inside-bbox-prefilter-dropped", "fem_anim/contact/intersection.py",
+             "q = others[np.all((x[others] >= lo) & (x[others] <= hi), axis=1)]",
+             "q = others",
+             ("tests/test_intersection_check.py::"
+              "test_only_vertices_in_a_bodys_bounding_box_get_its_winding_number",),
+             "every vertex gets every body's winding number: right answers, cost grows as "
+             "vertices x triangles"),
+    Mutation("inside-cavity-bodies-ignored", "fem_anim/contact/intersection.py",
+             "bodies = solid_bodies(cells, F, components[1])", "bodies = None",
+             ("tests/test_intersection_check.py::"
+              "test_a_body_in_a_cavity_is_outside_and_one_in_the_material_is_inside",),
+             "each closed piece is a body: a hollow body's cavity surface is inside its outer "
+             "surface, every frame of it is reported"),
+    Mutation("inside-cavity-sign-lost", "fem_anim/contact/intersection.py",
+             "sign = np.where(np.arange(volume.size) == outer, 1.0, -1.0) * np.sign(volume)",
+             "sign = np.sign(volume)",
+             ("tests/test_intersection_check.py::"
+              "test_a_body_in_a_cavity_is_outside_and_one_in_the_material_is_inside",),
+             "a cavity oriented like the outer surface: w = 2 in the cavity, a body resting "
+             "there is reported"),
 ]
 
 
