@@ -1667,6 +1667,14 @@ MUTATIONS: list[Mutation] = [
               "test_each_step_satisfies_its_equations_from_the_written_outputs[pile]"),
              "a line search cut to a step g cannot resolve counts as the round-off floor: "
              "the pile's steps end with ||r|| at 1-10 % of the largest force term"),
+    Mutation("exact-never-withdrawn", "fem_anim/solver/minimiser.py",
+             "if taken >= (1.0 - WHOLE_STEP_TOL) * full:",
+             "if True:",
+             ("tests/test_exact_barrier_switch.py::"
+              "test_a_shortened_exact_direction_goes_back_to_the_projection",),
+             "a direction from the barrier's exact Hessian that the line search or the CCD "
+             "cut keeps the exact Hessian on: the pile's steps crawl on shortened exact "
+             "directions"),
 ]
 
 
