@@ -45,8 +45,9 @@ def test_round_off_floor_needs_a_direction_that_promised_nothing():
 def test_a_shortened_exact_direction_goes_back_to_the_projection():
     """A direction from the barrier's exact Hessian taken whole keeps the exact Hessian; one
     the line search or the CCD shortened goes back to IPC's projection, the exact Hessian
-    then tried again only EXACT_SHRINK times nearer, and never again in the step once
-    that is the test's size itself."""
+    then tried again only EXACT_SHRINK times nearer; once that is the test's size itself
+    the exact Hessian stays (the projection alone may reach the round-off floor short of
+    the force check)."""
     from fem_anim.simulation.loop import Simulation
 
     sim = Simulation(Scene.from_toml(STACK.format(steps=1)))
@@ -75,8 +76,12 @@ def test_a_shortened_exact_direction_goes_back_to_the_projection():
     assert m._near == minimiser.EXACT_NEAR / minimiser.EXACT_SHRINK
     assert m._exact_ok and m.exact_withdrawn == 1
     m._near = 1.0
+    assert not direction_taken(0.5)  # at the test's size itself: the exact Hessian stays
+    assert m._exact_on and ipc.projection == ipctk.PSDProjectionMethod.NONE
+    assert m._exact_ok and m.exact_withdrawn == 1
+    m._near = minimiser.EXACT_SHRINK
     assert direction_taken(0.999)
-    assert not m._exact_ok  # at the test's size: projected for the rest of the step
+    assert m._near == 1.0 and m.exact_withdrawn == 2
     # a direction from the projection is never withdrawn
     m._exact_on, m._exact_full = False, None
     assert not m._withdraw_exact(x) and m.exact_withdrawn == 2

@@ -38,8 +38,9 @@ the projection and tries the exact Hessian again once the steps are :data:`EXACT
 times smaller, down to the test's size itself; a failure there keeps the projection for the
 rest of the step (docs/contact.md, "Where a pile's Newton iterations and seconds go",
 measures the factors). An exact direction that the CCD bound or the line search shortened
-counts as such a failure too, its shortened step kept: Newton's local phase takes its steps
-whole, and a model that needs them cut is not in it yet.
+counts as such a failure too, its shortened step kept, until the exact Hessian is tried at
+the test's size itself: Newton's local phase takes its steps whole, and a model that needs
+them cut is not in it yet.
 """
 
 from __future__ import annotations
@@ -381,7 +382,10 @@ class Minimiser:
         """After the line search of a direction from the barrier's exact Hessian: whether
         it was shortened (by the CCD bound or the line search), and if so go back to IPC's
         projection, as after a direction that failed (the exact Hessian tried again once
-        the steps are :data:`EXACT_SHRINK` times smaller, down to the test's size).
+        the steps are :data:`EXACT_SHRINK` times smaller). Once that is the test's size
+        itself, a shortened exact step is kept on the exact Hessian, as before: the
+        projection alone converges only linearly there and can reach the round-off floor
+        short of the force check (the friction cubes of ``tests/test_adjoint_contact.py``).
 
         Newton's local phase, where the exact Hessian converges quadratically, takes its
         steps whole; a shortened step shows the exact model does not hold there yet, and
@@ -389,17 +393,14 @@ class Minimiser:
         (docs/contact.md, "The 4-box pile against today and against the baseline").
         """
         full, self._exact_full = self._exact_full, None
-        if full is None or not self._exact_on:
+        if full is None or not self._exact_on or self._near <= 1.0:
             return False
         self._x_before.axpy(-1.0, x)  # x_k - x_{k+1} = alpha y
         taken = self._x_before.norm(PETSc.NormType.INFINITY)
         if taken >= (1.0 - WHOLE_STEP_TOL) * full:
             return False
         self.exact_withdrawn += 1
-        if self._near > 1.0:
-            self._near = max(1.0, self._near / EXACT_SHRINK)
-        else:
-            self._exact_ok = False
+        self._near = max(1.0, self._near / EXACT_SHRINK)
         self._exact_on = False
         self.problem.ipc.exact_hessian(False)
         return True
