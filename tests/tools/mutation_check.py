@@ -1751,6 +1751,25 @@ MUTATIONS: list[Mutation] = [
               "test_a_body_in_a_cavity_is_outside_and_one_in_the_material_is_inside",),
              "a cavity oriented like the outer surface: w = 2 in the cavity, a body resting "
              "there is reported"),
+    Mutation("roundoff-without-promise", "fem_anim/solver/stopping.py",
+             "abs(g_prev - g) <= resolution(g, g_prev) and \\\n"
+             "                    (self.stopping != \"step\" or self.promised_nothing("
+             "resolution(g, g_prev))):",
+             "abs(g_prev - g) <= resolution(g, g_prev):",
+             ("tests/test_exact_barrier_switch.py::"
+              "test_round_off_floor_needs_a_direction_that_promised_nothing",
+              "tests/test_contact_pace.py::"
+              "test_each_step_satisfies_its_equations_from_the_written_outputs[pile]"),
+             "a line search cut to a step g cannot resolve counts as the round-off floor: "
+             "the pile's steps end with ||r|| at 1-10 % of the largest force term"),
+    Mutation("exact-never-withdrawn", "fem_anim/solver/minimiser.py",
+             "if taken >= (1.0 - WHOLE_STEP_TOL) * full:",
+             "if True:",
+             ("tests/test_exact_barrier_switch.py::"
+              "test_a_shortened_exact_direction_goes_back_to_the_projection",),
+             "a direction from the barrier's exact Hessian that the line search or the CCD "
+             "cut keeps the exact Hessian on: the pile's steps crawl on shortened exact "
+             "directions"),
 ]
 
 
