@@ -18,6 +18,10 @@ checkpoint therefore resumes on any number of processes and at any scene extent.
 The physics must be the same: every key but ``[solver]``, ``[output]`` and ``[render]``
 (a change is refused, naming the key). The solver settings may change; :func:`describe_resume`
 says which ones the resumed run continues with.
+
+A run with a shell body beside solids keeps the same record (:func:`run_meta`,
+:func:`invalid_record`) and one set of state arrays per part (:func:`part_arrays`,
+:func:`part_fields`): :mod:`fem_anim.simulation.joint_checkpoint`.
 """
 
 from __future__ import annotations
@@ -84,7 +88,7 @@ def _changes(old: dict, new: dict) -> list[str]:
 class Checkpoint:
     """What :func:`load_checkpoint` returns."""
 
-    state: State
+    state: State  # a joint run's: a JointState (fem_anim.simulation.joint_loop)
     frame: int
     frames_written: int
     rows: list[dict]
