@@ -9,7 +9,8 @@ stiffness (:meth:`fem_anim.contact.ipc.IPCContact.state`) and the Hessian's patt
 the contact pairs are part of what is resumed. A second signal stops the run at once; the
 last periodic checkpoint continues it. A changed physics key is refused in one line naming
 it, exit 2, nothing touched. Under ``mpirun``: a 2-rank run interrupted and resumed on 1 and
-on 2 ranks ends where the serial uninterrupted run does, to 1e-8.
+on 2 ranks, and a serial one resumed on 2, end where the serial uninterrupted run does, to
+1e-8.
 """
 
 from __future__ import annotations
@@ -207,10 +208,11 @@ def test_physics_change_on_resume_is_refused_naming_the_key(tmp_path, monkeypatc
 
 
 @pytest.mark.mpi
-def test_two_rank_run_resumes_on_one_and_two_ranks(tmp_path, whole):
+def test_resume_on_another_rank_count(tmp_path, monkeypatch, whole):
     """Interrupted under ``mpirun -n 2`` after step 3 (tests/mpi/mpi_joint_interrupt.py),
-    resumed on 2 ranks and, from a copy, on 1: both end where the serial uninterrupted run
-    does, every frame and every step's energies to 1e-8."""
+    resumed on 2 ranks and, from a copy, on 1; interrupted on 1 rank, resumed on 2: each
+    ends where the serial uninterrupted run does, every frame and every step's total energy
+    to 1e-8."""
     import shutil
 
     from conftest import ROOT, clean_environment, fem_anim_command, mpirun_command
@@ -227,7 +229,10 @@ def test_two_rank_run_resumes_on_one_and_two_ranks(tmp_path, whole):
                        env=clean_environment(), cwd=ROOT)
     assert r.returncode == 130, r.stdout + r.stderr
     shutil.copytree(out, tmp_path / "cut1")
-    for ranks, folder in ((2, out), (1, tmp_path / "cut1")):
+    with monkeypatch.context() as m:  # 1 -> 2: stopped in this process
+        _signal_after(m, {3: signal.SIGINT})
+        assert _cli("run", "-q", str(scene), "-o", str(tmp_path / "serial"))[0] == 130
+    for ranks, folder in ((2, out), (1, tmp_path / "cut1"), (2, tmp_path / "serial")):
         command = (prefix if ranks == 2 else []) + fem_anim_command() + \
             ["run", "-q", str(scene), "--resume", str(folder)]
         r = subprocess.run(command, capture_output=True, text=True, timeout=900,
@@ -236,7 +241,7 @@ def test_two_rank_run_resumes_on_one_and_two_ranks(tmp_path, whole):
         a, b = _stats(whole), _stats(folder)
         assert len(a) == len(b) == 6
         energy = np.array([[float(row["total_energy"]) for row in rows] for rows in (a, b)])
-        print(f"resumed on {ranks}: total energy to "
+        print(f"{folder.name} resumed on {ranks}: total energy to "
               f"{np.max(np.abs(energy[1] / energy[0] - 1.0)):.2g} relative")
         assert np.allclose(energy[1], energy[0], rtol=1e-8, atol=0.0), ranks
         for name in TRAJECTORIES:
@@ -244,5 +249,6 @@ def test_two_rank_run_resumes_on_one_and_two_ranks(tmp_path, whole):
             scale = np.abs(fa[-1]).max()
             assert len(fa) == len(fb) == 7
             gap = max(np.abs(x - y).max() for x, y in zip(fa, fb)) / scale
-            print(f"resumed on {ranks}: {name} frames to {gap:.2g} of the last frame's largest")
-            assert gap <= 1e-8, (ranks, name)
+            print(f"{folder.name} resumed on {ranks}: {name} frames to {gap:.2g} of the "
+                  "last frame's largest entry")
+            assert gap <= 1e-8, (folder.name, ranks, name)
