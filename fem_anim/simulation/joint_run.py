@@ -51,7 +51,7 @@ from fem_anim.scene.loading import Scene
 from fem_anim.simulation.energy_report import energy_report, roundoff_energy, write_summary
 from fem_anim.simulation.adaptive import AdaptiveStepper
 from fem_anim.simulation.checkpoint import describe_resume
-from fem_anim.simulation.interrupt import Interrupts
+from fem_anim.simulation.interrupt import Interrupts, stop_at_once
 from fem_anim.simulation.joint_checkpoint import (load_joint_checkpoint, restore_joint,
                                                   save_joint_checkpoint, solver_view)
 from fem_anim.simulation.joint_loop import JointSimulation, JointState
@@ -166,9 +166,11 @@ def run_joint(scene: Scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD,
         return (np.concatenate([u for u, _ in parts]),
                 np.concatenate([e[k] for (_, e), k in zip(parts, parents)]))
 
-    states = sim.initial_state()
-    initial = sim.energies(states)
-    initial["roundoff"] = sum(roundoff_energy(s, d) for s, d in zip(sim.scenes, sim.domains))
+    with stop_at_once():  # nothing to keep yet
+        states = sim.initial_state()
+        initial = sim.energies(states)
+        initial["roundoff"] = sum(roundoff_energy(s, d)
+                                  for s, d in zip(sim.scenes, sim.domains))
     run_dir = RunDirectory(Path(out), comm, resume)
     try:  # nothing is deleted on failure: the staging area is what --resume continues
         with Interrupts(comm) as interrupts:
