@@ -6,7 +6,11 @@ belongs to exactly one tetrahedron. It is wound so that its normal
 ``(b - a) x (c - a)`` points away from the tetrahedron's fourth vertex, i.e. out of the
 body: counter-clockwise seen from outside, USD's ``rightHanded`` orientation and the
 convention of OBJ and PLY. A 2D run's bodies are flat sheets in the plane z = 0; their
-surface is the triangles themselves, counter-clockwise seen from +z.
+surface is the triangles themselves, counter-clockwise seen from +z. A shell (a triangle
+mesh of the mid-surface in 3D, docs/cloth.md; its triangles are linear simplices, seed
+eq. 26) has no inside: its surface is its triangles themselves, in the run's vertex order,
+each normal ``(b - a) x (c - a)`` the one its mesh gives it (``sheet=True``); the exporters
+mark it two-sided.
 
 Each body's surface has its own vertex numbering (the mesh vertices its faces use, in
 mesh order), so a body exports as one self-contained mesh; ``vertices`` maps it back to
@@ -51,19 +55,28 @@ class BodySurface:
     owner: np.ndarray
 
 
-def boundary_faces(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def boundary_faces(points: np.ndarray, cells: np.ndarray,
+                   sheet: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The boundary faces of a simplex mesh, wound outward, and the cell owning each.
 
     Args:
         points: Rest vertex coordinates ``(v, d)``, d = 2 or 3.
-        cells: Tetrahedra ``(m, 4)`` or, in 2D, triangles ``(m, 3)``.
+        cells: Tetrahedra ``(m, 4)`` or triangles ``(m, 3)`` (a 2D run's, or a shell's).
+        sheet: The triangles are a surface in 3D (a shell): each is its own face, as wound
+            in ``cells``.
 
     Returns:
         ``(faces, owner)``: triangles ``(f, 3)`` of run vertex numbers whose normal points
-        out of their cell (in 2D: every triangle, counter-clockwise about +z), and the cell
-        number of each.
+        out of their cell (in 2D: every triangle, counter-clockwise about +z; a sheet's:
+        every triangle as given), and the cell number of each.
     """
     cells = np.asarray(cells, dtype=np.int64)
+    if cells.ndim != 2 or cells.shape[1] not in (3, 4):
+        raise ValueError(f"cells of {cells.shape[-1]} vertices: not triangles or tetrahedra")
+    if sheet:
+        if cells.shape[1] != 3:
+            raise ValueError("a shell's cells must be triangles")
+        return cells.copy(), np.arange(cells.shape[0])
     if cells.shape[1] == 3:  # 2D: the sheet itself, counter-clockwise about +z
         x = points[cells]
         area2 = (x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1]) \
@@ -84,18 +97,20 @@ def boundary_faces(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, n
     return faces, owner
 
 
-def body_surfaces(points: np.ndarray, cells: np.ndarray, body: np.ndarray) -> list[BodySurface]:
+def body_surfaces(points: np.ndarray, cells: np.ndarray, body: np.ndarray,
+                  sheet: bool = False) -> list[BodySurface]:
     """The boundary surface of every body, each with its own vertex numbering.
 
     Args:
         points: Rest vertex coordinates ``(v, d)``.
         cells: The run's cells.
         body: The body number of each cell, ``(m,)`` (0, 1, ...).
+        sheet: The cells are triangles of surfaces in 3D (:func:`boundary_faces`).
 
     Returns:
         One :class:`BodySurface` per body, in body order.
     """
-    faces, owner = boundary_faces(points, cells)
+    faces, owner = boundary_faces(points, cells, sheet)
     surfaces = []
     for k in range(int(body.max()) + 1 if body.size else 0):
         mine = body[owner] == k

@@ -67,8 +67,9 @@ def export_command(args) -> int:
         0.
 
     Raises:
-        FemAnimError: for a run that cannot be read, a target fem_anim does not own, or an
-            OS error (naming the file).
+        FemAnimError: for a run that cannot be read or exported (whatever the reader
+            cannot handle is this one line, never a traceback), a target fem_anim does not
+            own, or an OS error (naming the file).
     """
     from mpi4py import MPI
 
@@ -81,6 +82,8 @@ def export_command(args) -> int:
             error = str(err)
         except OSError as err:
             error = describe_os_error(err)
+        except (ValueError, KeyError, IndexError, TypeError) as err:  # a run we cannot read
+            error = f"the run in {args.outdir} cannot be exported: {type(err).__name__}: {err}"
     error = comm.bcast(error, root=0)
     if error:
         raise FemAnimError(error)

@@ -8,6 +8,22 @@ validated scene: its name, bodies, obstacles, gravity).
 :func:`read_run` gathers them into a :class:`RunData`; the exporters take that and nothing
 else, so a finished run and a run's staging area (read before it is installed) export
 the same way.
+
+Three kinds of run are read:
+
+* solids (tetrahedra) and 2D runs (triangles in z = 0): each body's surface is its boundary
+  (:func:`~fem_anim.export.boundary.boundary_faces`);
+* a shell run (``[shell]``: the triangles of a mid-surface in 3D, docs/cloth.md; P1 with the
+  hinge, P2 with the Kirchhoff-Love bending, whose trajectory holds the P2 dofs): the
+  surface is the triangles themselves (``sheet``), refined through the edge dofs for P2;
+* a shell beside solids (:mod:`fem_anim.simulation.joint_run`; one minimisation per step,
+  seed eq. 4): its ``trajectory.h5`` is already one triangle surface, the solids' boundary
+  triangles and the shell's triangles on all vertices of both meshes (solids first). Its
+  triangles are read as a sheet, each body's from its part: the solids' triangles wound
+  outward from ``solids.h5``'s tetrahedra (the seen surface stores them with sorted
+  vertices), numbered by the solid body of the tetrahedron behind each, the shell's as its
+  mesh winds them. The energy density of a face is then the seen surface's own (the solid's
+  tetrahedron under it, J/m^3, or the shell's triangle, J/m^2).
 """
 
 from __future__ import annotations
@@ -19,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_anim.errors import FemAnimError
-from fem_anim.export.boundary import BodySurface, body_surfaces, refine_p2
+from fem_anim.export.boundary import BodySurface, body_surfaces, boundary_faces, refine_p2
 
 __all__ = ["RunData", "read_run"]
 
@@ -41,6 +57,10 @@ class RunData:
         path: The folder the run was read from.
         nodes: The ``(i, j)`` vertex pair of each row of the displacement's dofs when the
             trajectory holds them with edge rows (a P2 body), else None.
+        sheet: The cells are triangles of surfaces in 3D, each its own face (a shell run, or
+            the seen surface of a shell beside solids).
+        shells: The numbers of the bodies that are shells (two-sided, energy density per
+            area, J/m^2).
     """
 
     name: str
@@ -54,6 +74,13 @@ class RunData:
     obstacles: list[dict] = field(default_factory=list)
     path: Path | None = None
     nodes: np.ndarray | None = None
+    sheet: bool = False
+    shells: frozenset[int] = frozenset()
+
+    def energy_unit(self, body: int) -> str:
+        """The unit of a body's energy density: J/m^2 for a shell (per mid-surface area),
+        J/m^3 for a solid (a 2D run's too: per unit of depth)."""
+        return "J/m^2" if body in self.shells else "J/m^3"
 
     def displacement(self, frame: int) -> np.ndarray:
         """Vertex displacements of one frame ``(v, 3)`` (m)."""
@@ -64,14 +91,14 @@ class RunData:
         return self.points + self.displacement(frame)
 
     def energy_density(self, frame: int) -> np.ndarray:
-        """Each cell's mean energy density of one frame ``(m,)`` (J/m^3)."""
+        """Each cell's mean energy density of one frame ``(m,)`` (:meth:`energy_unit`)."""
         return self._dataset(f"energy_density{frame}")
 
     def surfaces(self) -> list[BodySurface]:
         """Each body's outward boundary surface (:mod:`fem_anim.export.boundary`); for a P2
         body refined through its edge dofs (:func:`~fem_anim.export.boundary.refine_p2`),
         its ``vertices`` then rows of :meth:`surface_points`."""
-        surfaces = body_surfaces(self.points, self.cells, self.body)
+        surfaces = body_surfaces(self.points, self.cells, self.body, self.sheet)
         if self.nodes is None:
             return surfaces
         return refine_p2(surfaces, self.nodes, self.points.shape[0])
@@ -94,8 +121,12 @@ class RunData:
     def _dataset(self, name: str) -> np.ndarray:
         import h5py
 
-        with h5py.File(self.path / "trajectory.h5", "r") as h5:
-            return np.asarray(h5[name], dtype=float)
+        file = self.path / "trajectory.h5"
+        try:
+            with h5py.File(file, "r") as h5:
+                return np.asarray(h5[name], dtype=float)
+        except (OSError, KeyError, ValueError, TypeError) as err:
+            raise FemAnimError(f"{file}: cannot read {name}: {err}") from None
 
 
 def read_run(path: Path) -> RunData:
@@ -135,13 +166,79 @@ def read_run(path: Path) -> RunData:
         raise FemAnimError(f"the run in {path} cannot be read: {err}") from None
     bodies = scene.get("body") or []
     names = [b["name"] for b in bodies] if bodies else [scene.get("name", "body")]
-    dim = cells.shape[1] - 1
+    shells = frozenset(k for k, b in enumerate(bodies) if b.get("shell"))
+    if not bodies and scene.get("shell"):
+        shells = frozenset({0})
+    if cells.ndim != 2 or cells.shape[1] not in (3, 4) or points.ndim != 2:
+        raise FemAnimError(f"the run in {path} cannot be exported: its mesh has cells of "
+                           f"{cells.shape[-1]} vertices (triangles or tetrahedra only)")
+    sheet = bool(shells) and cells.shape[1] == 3
+    dim = 3 if sheet else cells.shape[1] - 1
+    if shells and bodies and len(shells) < len(bodies):  # a shell beside solids
+        cells, body = _joint_surface(path, points, cells, len(bodies), shells)
     gravity = np.asarray((scene.get("gravity") or {}).get("acceleration") or np.zeros(dim),
                          dtype=float)
-    if int(body.max()) + 1 != len(names):
-        raise FemAnimError(f"the run in {path} has {int(body.max()) + 1} bodies in its mesh "
-                           f"but {len(names)} in its scene")
+    if body.size == 0 or int(body.max()) + 1 != len(names):
+        raise FemAnimError(f"the run in {path} has {int(body.max()) + 1 if body.size else 0} "
+                           f"bodies in its mesh but {len(names)} in its scene")
     if nodes is not None and np.all(nodes[:, 0] == nodes[:, 1]):
         nodes = None  # vertex dofs only (P1): the vertex displacement is all of it
     return RunData(scene.get("name", "scene"), points, cells, body, names, times, dim,
-                   gravity, list(scene.get("obstacle") or []), path, nodes)
+                   gravity, list(scene.get("obstacle") or []), path, nodes, sheet, shells)
+
+
+def _joint_surface(path: Path, points: np.ndarray, triangles: np.ndarray, num_bodies: int,
+                   shells: frozenset[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The seen surface of a shell beside solids, each triangle wound as its body wants it
+    and numbered by its ``[[body]]``.
+
+    Args:
+        path: The run directory (``solids.h5`` is read from it).
+        points: The seen surface's points (the solids' vertices, then the shell's).
+        triangles: Its triangles (the solids' boundary triangles, then the shell's).
+        num_bodies: The number of ``[[body]]`` tables.
+        shells: The shell body's number (one).
+
+    Returns:
+        ``(triangles, body)``: the solids' triangles wound outward (as their tetrahedra
+        give them, :func:`~fem_anim.export.boundary.boundary_faces`), the shell's as stored;
+        and the ``[[body]]`` number of each (the solids' in the order of their tables).
+
+    Raises:
+        FemAnimError: ``solids.h5`` is missing or does not match the seen surface.
+    """
+    import h5py
+
+    from fem_anim.mesh.connectivity import cell_components
+
+    file = path / "solids.h5"
+    try:
+        with h5py.File(file, "r") as h5:
+            solid_points = np.asarray(h5["data0"], dtype=float)
+            tets = np.asarray(h5["data1"], dtype=np.int64)
+            solid_body = np.asarray(h5["body"], dtype=np.int64) if "body" in h5 else \
+                cell_components(tets, solid_points.shape[0]).astype(np.int64)
+    except (OSError, KeyError, ValueError, TypeError) as err:
+        raise FemAnimError(f"the shell-and-solids run in {path} cannot be read: {file}: "
+                           f"{err}") from None
+    ns = solid_points.shape[0]
+    solid_numbers = [k for k in range(num_bodies) if k not in shells]
+    if tets.ndim != 2 or tets.shape[1] != 4 or not np.array_equal(points[:ns], solid_points) \
+            or int(solid_body.max()) + 1 != len(solid_numbers):
+        raise FemAnimError(f"the shell-and-solids run in {path} cannot be read: {file} does "
+                           f"not hold the solids of its trajectory.h5")
+    faces, owner = boundary_faces(solid_points, tets)
+    on_solid = np.all(triangles < ns, axis=1)
+    key = np.sort(triangles[on_solid], axis=1)
+    ours = np.sort(faces, axis=1)
+    order = np.lexsort(ours.T[::-1])
+    code = ours[order] @ np.array([ns * ns, ns, 1])
+    found = np.minimum(np.searchsorted(code, key @ np.array([ns * ns, ns, 1])), len(code) - 1)
+    match = order[found]
+    if len(key) != len(faces) or not np.array_equal(np.sort(faces[match], axis=1), key):
+        raise FemAnimError(f"the shell-and-solids run in {path} cannot be read: its seen "
+                           f"surface is not the boundary of the tetrahedra in {file}")
+    out, body = triangles.copy(), np.full(triangles.shape[0], min(shells), dtype=np.int64)
+    out[on_solid] = faces[match]
+    body[on_solid] = np.asarray(solid_numbers)[solid_body[owner[match]]]
+    return out, body

@@ -9,7 +9,11 @@ default prim) holding
   wound counter-clockwise seen from outside (``orientation = rightHanded``, no subdivision),
   ``points`` and ``extent`` sampled at every frame, and the primvars ``displacement``
   (|u| per vertex, m), ``energy_density`` (per face: the mean psi of the cell behind it,
-  J/m^3) and ``body`` (the body number, constant);
+  J/m^3; a shell's, per unit mid-surface area, J/m^2: the unit is in the primvar's
+  ``documentation``) and ``body`` (the body number, constant). A shell (cloth) is its
+  triangles themselves, wound as its mesh winds them, with ``doubleSided = true``: it has
+  no inside, and a renderer must draw both its faces (Blender draws both sides of every
+  mesh unless back-face culling is on);
 * ``/<scene>/obstacles/<name>``: each static obstacle, a plane as a finite square quad (twice
   the bodies' extent over the run, about the projection of their centre) and a sphere as a
   ``UsdGeom.Sphere``.
@@ -106,14 +110,15 @@ def _obstacle_prims(stage, root: str, run: RunData, low: np.ndarray, high: np.nd
             sphere.CreateRadiusAttr(radius)
             sphere.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-radius), Gf.Vec3f(radius)]))
             c = np.zeros(3)
-            c[:run.dim] = obstacle["center"]
+            c[:len(obstacle["center"])] = obstacle["center"]
             UsdGeom.Xformable(sphere).AddTranslateOp().Set(Gf.Vec3d(*c))
             continue
         n = np.zeros(3)
-        n[:run.dim] = obstacle["normal"]
+        n[:len(obstacle["normal"])] = obstacle["normal"]
         n /= np.linalg.norm(n)
         p = np.zeros(3)
-        p[:run.dim] = obstacle.get("point") or np.zeros(run.dim)
+        point = obstacle.get("point") or []
+        p[:len(point)] = point
         foot = center - np.dot(center - p, n) * n  # the bodies' centre projected on the plane
         e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
         e1 /= np.linalg.norm(e1)
@@ -173,13 +178,18 @@ def write_usd(run: RunData, path: Path, start_frame: int = 1) -> None:
         mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
         primvars = UsdGeom.PrimvarsAPI(mesh)
+        if surface.body in run.shells:  # a cloth: no inside, both faces seen
+            mesh.CreateDoubleSidedAttr(True)
         primvars.CreatePrimvar("body", Sdf.ValueTypeNames.Int, UsdGeom.Tokens.constant) \
             .Set(surface.body)
+        energy = primvars.CreatePrimvar("energy_density", Sdf.ValueTypeNames.FloatArray,
+                                        UsdGeom.Tokens.uniform)
+        energy.GetAttr().SetDocumentation(
+            f"mean strain energy density of the cell behind each face, "
+            f"{run.energy_unit(surface.body)}")
         meshes.append((mesh, surface,
                        primvars.CreatePrimvar("displacement", Sdf.ValueTypeNames.FloatArray,
-                                              UsdGeom.Tokens.vertex),
-                       primvars.CreatePrimvar("energy_density", Sdf.ValueTypeNames.FloatArray,
-                                              UsdGeom.Tokens.uniform)))
+                                              UsdGeom.Tokens.vertex), energy))
     low, high = np.full(3, np.inf), np.full(3, -np.inf)
     for k, code in enumerate(codes):
         u = run.surface_displacement(k)

@@ -23,13 +23,14 @@ directory whose files are installed only when the run succeeds
   energy report of :func:`~fem_anim.simulation.energy_report.energy_report` over both
   bodies, software versions, PETSc options).
 
+With ``output.usd`` the run also writes ``<scene>.usdc`` (the solids' boundaries and the
+cloth, one mesh per body: :mod:`fem_anim.export.usd_stage`), which ``fem-anim export``
+writes from a finished run too.
+
 Like a one-mesh run it writes ``checkpoint.npz`` every ``output.checkpoint_every`` frames
 (:mod:`fem_anim.simulation.joint_checkpoint`), stops at the end of a frame on SIGINT, SIGTERM
 or SIGHUP with a checkpoint there (a second signal stops it at once:
 :mod:`fem_anim.simulation.interrupt`), and ``--resume`` continues it (:doc:`/resume`).
-
-Not done for such a run yet: the USD export (the run says so in one line when
-``output.usd`` is on).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_anim.errors import FemAnimError, Interrupted, describe_os_error
+from fem_anim.export.usd_stage import export_staged_run, usd_file_name
 from fem_anim.output.files import (CellGather, RunDirectory, StatsWriter, VertexGather,
                                    write_final, write_scene)
 from fem_anim.output.trajectory import TrajectoryWriter
@@ -142,9 +144,6 @@ def run_joint(scene: Scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD,
     """
     if sim is None:
         sim = JointSimulation.from_scene(scene, comm, cli_options, preset)
-    if scene["output"]["usd"] and not quiet and comm.rank == 0:
-        print("fem-anim: output.usd: not made for a shell with solids yet (ParaView reads "
-              "solids.xdmf and shell.xdmf)", file=sys.stderr)
     gathers = [(VertexGather(d, p.V), CellGather(d)) for d, p in zip(sim.domains, sim.parts)]
 
     def fields(states):
@@ -194,6 +193,9 @@ def run_joint(scene: Scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD,
                                       (provenance or {}) | {"petsc_options": sim.options})
 
                 _io(comm, path, summary)
+                if scene["output"]["usd"]:  # installed with the run's other files
+                    _io(comm, run_dir.file(usd_file_name(scene.name)), export_staged_run,
+                        run_dir.staging, scene.name, comm, int(scene["output"]["start_frame"]))
             except FemAnimError as err:
                 if interrupts.received is None or isinstance(err, Interrupted):
                     raise

@@ -37,7 +37,10 @@ quadratic convergence needs the true Hessian). If a direction from the exact Hes
 the projection and tries the exact Hessian again once the steps are :data:`EXACT_SHRINK`
 times smaller, down to the test's size itself; a failure there keeps the projection for the
 rest of the step (docs/contact.md, "Where a pile's Newton iterations and seconds go",
-measures the factors).
+measures the factors). An exact direction that the CCD bound or the line search shortened
+counts as such a failure too, its shortened step kept, until the exact Hessian is tried at
+the test's size itself: Newton's local phase takes its steps whole, and a model that needs
+them cut is not in it yet.
 """
 
 from __future__ import annotations
@@ -57,13 +60,15 @@ from fem_anim.solver.stopping import (ROUNDOFF_REASON, StoppingTest, accept_at_b
                                       at_objective_roundoff, finish_at_roundoff, reason_name,
                                       resolve_stopping, scene_diagonal)
 
-__all__ = ["EXACT_NEAR", "EXACT_SHRINK", "Minimiser", "NONLINEAR_METHODS"]
+__all__ = ["EXACT_NEAR", "EXACT_SHRINK", "Minimiser", "NONLINEAR_METHODS", "WHOLE_STEP_TOL"]
 
 #: With IPC's step test: the barrier's exact Hessian once a full Newton step is below this
 #: many times the test's size.
 EXACT_NEAR = 100.0
 #: ... and, after an exact direction failed, once the steps are this many times smaller.
 EXACT_SHRINK = 10.0
+#: A step counts as taken whole when it is at least 1 - this of the full Newton step.
+WHOLE_STEP_TOL = 1e-6
 
 #: Scene ``solver.method`` -> PETSc options (lowest layer above the library defaults).
 NONLINEAR_METHODS: dict[str, dict[str, str]] = {
@@ -137,6 +142,11 @@ class Minimiser:
         #: where the exact barrier Hessian first takes over, x the test's size
         self.exact_near_start = EXACT_NEAR
         self._exact_ok = False
+        self._exact_on = False
+        self._exact_full = None
+        self._x_before = None  # the iterate a direction from the exact Hessian started at
+        #: directions from the barrier's exact Hessian not taken whole (the run's count)
+        self.exact_withdrawn = 0
         if not self.saddle:
             snes.setObjective(self.objective)
         snes.setFunction(problem.residual, self.b)
@@ -241,6 +251,7 @@ class Minimiser:
         self._exact_ok = self._exact_near
         self._near = self.exact_near_start  # x the test's size: the exact Hessian from here
         self._exact_on = False
+        self._exact_full = None  # ||p||_inf of the last direction from the exact Hessian
         if self._exact_near:
             self.problem.ipc.exact_hessian(False)
         self._own_linear_its = 0
@@ -358,13 +369,41 @@ class Minimiser:
         if it > 0:
             self.reuse.check_step(snes.getSolution())
         reason = self.stop.test(it, norms[2], g, snes.getTolerances(), snes.getSolution())
-        if self._exact_ok and reason == 0 and self.stop.steps and \
+        withdrawn = it > 0 and self._withdraw_exact(snes.getSolution())
+        if self._exact_ok and reason == 0 and not withdrawn and self.stop.steps and \
                 self.stop.steps[-1] <= self._near * self.stop.step_scale:
             self._exact_on = True
             # near the minimiser the exact Hessian is positive definite: quadratic
             # convergence where IPC's per-pair projection converges linearly
             self.problem.ipc.exact_hessian(True)
         return reason
+
+    def _withdraw_exact(self, x: PETSc.Vec) -> bool:
+        """After the line search of a direction from the barrier's exact Hessian: whether
+        it was shortened (by the CCD bound or the line search), and if so go back to IPC's
+        projection, as after a direction that failed (the exact Hessian tried again once
+        the steps are :data:`EXACT_SHRINK` times smaller). Once that is the test's size
+        itself, a shortened exact step is kept on the exact Hessian, as before: the
+        projection alone converges only linearly there and can reach the round-off floor
+        short of the force check (the friction cubes of ``tests/test_adjoint_contact.py``).
+
+        Newton's local phase, where the exact Hessian converges quadratically, takes its
+        steps whole; a shortened step shows the exact model does not hold there yet, and
+        on the pile its following directions are shortened again, for many iterations
+        (docs/contact.md, "The 4-box pile against today and against the baseline").
+        """
+        full, self._exact_full = self._exact_full, None
+        if full is None or not self._exact_on or self._near <= 1.0:
+            return False
+        self._x_before.axpy(-1.0, x)  # x_k - x_{k+1} = alpha y
+        taken = self._x_before.norm(PETSc.NormType.INFINITY)
+        if taken >= (1.0 - WHOLE_STEP_TOL) * full:
+            return False
+        self.exact_withdrawn += 1
+        self._near = max(1.0, self._near / EXACT_SHRINK)
+        self._exact_on = False
+        self.problem.ipc.exact_hessian(False)
+        return True
 
     def _precheck(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
         """Before the line search: record lambda^2/2 and bound the step.
@@ -382,6 +421,11 @@ class Minimiser:
         # the full step, before any bound shortens it (also read by the exact-Hessian switch)
         if self.stop.stopping == "step" or self._exact_near:
             self.stop.steps.append(y.norm(PETSc.NormType.INFINITY))
+        if self._exact_on:  # for _withdraw_exact: was this direction taken whole?
+            self._exact_full = self.stop.steps[-1]
+            if self._x_before is None:
+                self._x_before = x.duplicate()
+            x.copy(self._x_before)
         scaled = bound_step(self.problem, x, y) < 1.0 or replaced
         if self.problem.filter_inversion:
             scaled = filter_inverting(self.problem, x, y) or scaled
@@ -420,6 +464,8 @@ class Minimiser:
         self._clear_objective_cache()
         if self._g_seed is not None:  # seeded, never solved
             self._g_seed[0].destroy()
+        if self._x_before is not None:
+            self._x_before.destroy()
         self.hessian.destroy()
         self.reuse.destroy()
         self.snes.destroy()

@@ -1656,6 +1656,120 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_shell_solid.py::test_cloth_lands_on_itself_beside_a_solid",),
              "the joint barrier keeps no thickness: two layers of the cloth lying on each "
              "other come nearer than t"),
+    Mutation("shell-export-one-sided", "fem_anim/export/usd_stage.py",
+             "            mesh.CreateDoubleSidedAttr(True)",
+             "            pass",
+             ("tests/test_export_shell.py::test_shell_usd_is_the_trajectory_at_every_frame",),
+             "a cloth exported without doubleSided: renderers that cull back faces lose half "
+             "of it"),
+    Mutation("shell-export-energy-unit", "fem_anim/export/run_reader.py",
+             'return "J/m^2" if body in self.shells else "J/m^3"',
+             'return "J/m^3"',
+             ("tests/test_export_shell.py::test_shell_usd_is_the_trajectory_at_every_frame",),
+             "a shell's energy density (per area) labelled J/m^3"),
+    Mutation("joint-export-sorted-winding", "fem_anim/export/run_reader.py",
+             "    out[on_solid] = faces[match]\n",
+             "    out[on_solid] = triangles[on_solid]\n",
+             ("tests/test_export_shell.py::test_joint_run_exports_the_solid_and_the_cloth",),
+             "a joint run's solid exported with the seen surface's sorted (unwound) triangles"),
+    Mutation("joint-export-body-order", "fem_anim/export/run_reader.py",
+             "body[on_solid] = np.asarray(solid_numbers)[solid_body[owner[match]]]",
+             "body[on_solid] = solid_body[owner[match]]",
+             ("tests/test_export_shell.py::test_joint_body_numbers_follow_the_scene",),
+             "a joint run's solids numbered in the solids' mesh, not in the scene's [[body]] "
+             "order"),
+    Mutation("shell-export-winding-reversed", "fem_anim/export/boundary.py",
+             "        return cells.copy(), np.arange(cells.shape[0])",
+             "        return cells[:, [0, 2, 1]], np.arange(cells.shape[0])",
+             ("tests/test_export_shell.py::test_p2_shell_exports_its_quadratic_field_refined",),
+             "a shell's triangles exported against its mesh's winding: normals flipped"),
+    Mutation("export-traceback", "fem_anim/export/export_command.py",
+             "        except (ValueError, KeyError, IndexError, TypeError) as err:",
+             "        except FemAnimError as err:",
+             ("tests/test_export_shell.py::test_unreadable_runs_are_one_line",),
+             "a run the exporter cannot handle ends in a Python traceback"),
+    # -- the independent check sees a body inside another (inside-check) -------------------
+    Mutation("tunnel-solid-ccd-ignored", "fem_anim/simulation/newton_start.py",
+             "alpha = p.ipc.step_bound(u_last - target)", "alpha = 1.0",
+             ("tests/test_tunnelling.py::test_a_small_box_thrown_into_a_big_one_stays_outside",),
+             "Newton starts at the predictor whatever the CCD says: a small box thrown fast "
+             "starts, and stays, wholly inside a bigger one (no crossing to see)"),
+    Mutation("tunnel-joint-ccd-ignored", "fem_anim/simulation/joint_loop.py",
+             "alpha = p.ipc.step_bound(p.joint_array([s.u - y for s, y in zip(states, targets)]))",
+             "alpha = 1.0",
+             ("tests/test_tunnelling.py::test_a_small_cloth_thrown_into_a_cube_stays_outside",),
+             "the joint step starts at the predictor whatever the CCD says: a small cloth "
+             "thrown fast starts, and stays, wholly inside the cube"),
+    Mutation("inside-check-solids-ignored", "fem_anim/contact/intersection.py",
+             "            or len(enclosed_vertices(points + u, F, components, bodies))]",
+             "            or False]",
+             ("tests/test_intersection_check.py::"
+              "test_a_box_inside_a_box_is_found_and_one_outside_is_not[1]",
+              "tests/test_tunnelling.py::test_a_small_box_thrown_into_a_big_one_stays_outside"),
+             "crossed_frames asks ipctk only: a box wholly inside another passes"),
+    Mutation("inside-check-soup-ignored", "fem_anim/contact/intersection.py",
+             "or len(enclosed_vertices(x, triangles, components, bodies)))",
+             "or False)",
+             ("tests/test_intersection_check.py::"
+              "test_a_sheet_inside_a_cube_is_found_and_one_resting_on_it_is_not",),
+             "intersecting looks for crossings only: a sheet wholly inside a cube passes"),
+    Mutation("inside-winding-threshold", "fem_anim/contact/intersection.py",
+             "q = q[np.abs(winding_numbers(x, mine, x[q])) > 0.5]",
+             "q = q[np.abs(winding_numbers(x, mine, x[q])) > 1.5]",
+             ("tests/test_intersection_check.py::"
+              "test_a_box_inside_a_box_is_found_and_one_outside_is_not[2]",),
+             "no winding number passes the threshold: nothing is ever inside"),
+    Mutation("inside-orientation-lost", "fem_anim/contact/intersection.py",
+             "oriented[flipped] = tri[flipped][:, [0, 2, 1]]",
+             "oriented[flipped] = tri[flipped]",
+             ("tests/test_intersection_check.py::"
+              "test_the_winding_number_is_one_inside_whatever_the_triangle_order",),
+             "the sorted boundary triangles are not reoriented: the winding number is garbage"),
+    Mutation("inside-on-surface-counted", "fem_anim/contact/intersection.py",
+             "found.append(q[start:start + step][d > tol])",
+             "found.append(q[start:start + step])",
+             ("tests/test_intersection_check.py::"
+              "test_a_box_inside_a_box_is_found_and_one_outside_is_not[1]",),
+             "a vertex on the surface (touching) with |w| > 1/2 counts as inside"),
+    Mutation("inside-bbox-prefilter-dropped", "fem_anim/contact/intersection.py",
+             "q = others[np.all((x[others] >= lo) & (x[others] <= hi), axis=1)]",
+             "q = others",
+             ("tests/test_intersection_check.py::"
+              "test_only_vertices_in_a_bodys_bounding_box_get_its_winding_number",),
+             "every vertex gets every body's winding number: right answers, cost grows as "
+             "vertices x triangles"),
+    Mutation("inside-cavity-bodies-ignored", "fem_anim/contact/intersection.py",
+             "bodies = solid_bodies(cells, F, components[1])", "bodies = None",
+             ("tests/test_intersection_check.py::"
+              "test_a_body_in_a_cavity_is_outside_and_one_in_the_material_is_inside",),
+             "each closed piece is a body: a hollow body's cavity surface is inside its outer "
+             "surface, every frame of it is reported"),
+    Mutation("inside-cavity-sign-lost", "fem_anim/contact/intersection.py",
+             "sign = np.where(np.arange(volume.size) == outer, 1.0, -1.0) * np.sign(volume)",
+             "sign = np.sign(volume)",
+             ("tests/test_intersection_check.py::"
+              "test_a_body_in_a_cavity_is_outside_and_one_in_the_material_is_inside",),
+             "a cavity oriented like the outer surface: w = 2 in the cavity, a body resting "
+             "there is reported"),
+    Mutation("roundoff-without-promise", "fem_anim/solver/stopping.py",
+             "abs(g_prev - g) <= resolution(g, g_prev) and \\\n"
+             "                    (self.stopping != \"step\" or self.promised_nothing("
+             "resolution(g, g_prev))):",
+             "abs(g_prev - g) <= resolution(g, g_prev):",
+             ("tests/test_exact_barrier_switch.py::"
+              "test_round_off_floor_needs_a_direction_that_promised_nothing",
+              "tests/test_contact_pace.py::"
+              "test_each_step_satisfies_its_equations_from_the_written_outputs[pile]"),
+             "a line search cut to a step g cannot resolve counts as the round-off floor: "
+             "the pile's steps end with ||r|| at 1-10 % of the largest force term"),
+    Mutation("exact-never-withdrawn", "fem_anim/solver/minimiser.py",
+             "if taken >= (1.0 - WHOLE_STEP_TOL) * full:",
+             "if True:",
+             ("tests/test_exact_barrier_switch.py::"
+              "test_a_shortened_exact_direction_goes_back_to_the_projection",),
+             "a direction from the barrier's exact Hessian that the line search or the CCD "
+             "cut keeps the exact Hessian on: the pile's steps crawl on shortened exact "
+             "directions"),
     Mutation("joint-resume-drops-kappa", "fem_anim/simulation/joint_checkpoint.py",
              "    sim.problem.ipc.restore(ck.contact)\n", "    pass\n",
              ("tests/test_joint_resume.py::test_interrupted_joint_run_resumes_bit_for_bit[2]",),
