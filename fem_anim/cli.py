@@ -132,7 +132,7 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     out = _output_directory(args, scene)
     from fem_anim.scene.joint_rules import shell_body
     if shell_body(scene.data) is not None:  # a shell beside solids: two meshes, one step
-        return _run_joint(args, scene, Path(out), cli_options)
+        return _run_joint(args, scene, Path(out), cli_options, argv)
     from fem_anim.scene.contact_integrator import integrator_note
     if (note := integrator_note(scene.data)) and not args.quiet and MPI.COMM_WORLD.rank == 0:
         print(f"fem-anim: {note}", file=sys.stderr)
@@ -150,17 +150,7 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     try:
         result = sim.run(Path(out), quiet=args.quiet, resume=args.resume is not None)
     except (ConvergenceError, Interrupted) as err:
-        if not (Path(out) / ".partial" / "checkpoint.npz").is_file():
-            kept = f"the frames so far are kept in {out}/.partial (no checkpoint yet: " \
-                   "nothing to resume; a new run replaces them)"
-        else:
-            other = " (e.g. with other solver options)" \
-                if isinstance(err, ConvergenceError) else ""
-            kept = f"the frames so far and the last checkpoint are kept in {out}/.partial: " \
-                   f"continue with `{resume_command(argv, out)}`{other}"
-        if isinstance(err, Interrupted):
-            raise Interrupted(f"{err}; {kept}", err.signum) from None
-        raise ConvergenceError(f"{err}; {kept}") from None
+        _say_what_is_kept(err, out, argv)
     report = energy_report(result.rows, initial, scene)
     if MPI.COMM_WORLD.rank == 0:
         write_summary(result.output_dir / "summary.json", scene, result.rows, report,
@@ -176,23 +166,40 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
     return 0
 
 
-def _run_joint(args, scene, out: Path, cli_options: dict[str, str]) -> int:
+def _say_what_is_kept(err, out, argv: list[str]):
+    """Raise ``err`` again, saying what the stopped run keeps and how to continue it."""
+    if not (Path(out) / ".partial" / "checkpoint.npz").is_file():
+        kept = f"the frames so far are kept in {out}/.partial (no checkpoint yet: " \
+               "nothing to resume; a new run replaces them)"
+    else:
+        other = " (e.g. with other solver options)" \
+            if isinstance(err, ConvergenceError) else ""
+        kept = f"the frames so far and the last checkpoint are kept in {out}/.partial: " \
+               f"continue with `{resume_command(argv, out)}`{other}"
+    if isinstance(err, Interrupted):
+        raise Interrupted(f"{err}; {kept}", err.signum) from None
+    raise ConvergenceError(f"{err}; {kept}") from None
+
+
+def _run_joint(args, scene, out: Path, cli_options: dict[str, str], argv: list[str]) -> int:
     """``fem-anim run`` of a scene with a shell body (:mod:`fem_anim.simulation.joint_run`)."""
     from mpi4py import MPI
 
     from fem_anim.output.provenance import software_versions
     from fem_anim.simulation.energy_report import describe_energy
     from fem_anim.simulation.interrupt import stop_at_once
+    from fem_anim.simulation.joint_loop import JointSimulation
     from fem_anim.simulation.joint_run import run_joint
 
-    if args.resume is not None:
-        raise FemAnimError("--resume: a run with a shell body beside solids keeps no "
-                           "checkpoint yet: run it again")
     quiet_jit_logging()
-    with stop_at_once():
+    with stop_at_once():  # a signal while meshing or compiling: stop, leave no JIT lock
+        sim = JointSimulation.from_scene(scene, MPI.COMM_WORLD, cli_options, args.solver)
+    try:  # later a signal stops the run at a frame's end (run_joint)
         rows, report = run_joint(scene, out, MPI.COMM_WORLD, cli_options, args.quiet,
                                  {"versions": software_versions(MPI.COMM_WORLD)},
-                                 preset=args.solver)
+                                 preset=args.solver, resume=args.resume is not None, sim=sim)
+    except (ConvergenceError, Interrupted) as err:
+        _say_what_is_kept(err, str(out), argv)
     if MPI.COMM_WORLD.rank == 0 and (not args.quiet or report["flagged"]):
         last = rows[-1]
         print(f"{scene.name}: {last['step']} steps to t = {last['time']:.4g} s, total "

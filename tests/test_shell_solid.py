@@ -520,7 +520,7 @@ BAD_JOINT = {
     "no self contact": (DRAPE_SOFT.replace("friction = 0.3", "friction = 0.3\nself = false"),
                         "contact.self"),
     "top-level shell": (DRAPE_SOFT + "[shell]\nthickness = 0.001\n", "body[i].shell"),
-    "resume": (DRAPE_SOFT, "--resume"),
+    "resume": (DRAPE_SOFT, "nothing to resume"),
 }
 
 

@@ -1,7 +1,8 @@
 """The time loop (seed section 3.1): the simulation of a scene and its step (``loop``), the
 integrators' predictors and updates (``integrators``), the initial state (``initial_state``),
 each step's start (``newton_start``), adaptive retries (``adaptive``), the frame loop and its
-files (``run_loop``), checkpoints and resume, interrupts, the progress bar, the handles'
+files (``run_loop``), checkpoints and resume (one body's and, ``joint_checkpoint``, a shell
+beside solids'), interrupts, the progress bar, the handles'
 work per step (``handle_work``) and the energy report.
 """
 
@@ -12,6 +13,8 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "load_checkpoint": "checkpoint",
     "save_checkpoint": "checkpoint",
     "scene_hash": "checkpoint",
+    "load_joint_checkpoint": "joint_checkpoint",
+    "save_joint_checkpoint": "joint_checkpoint",
     "AT_REST": "energy_report",
     "DAMPED_THRESHOLD": "energy_report",
     "ROUNDOFF_STRAIN": "energy_report",

@@ -18,6 +18,10 @@ checkpoint therefore resumes on any number of processes and at any scene extent.
 The physics must be the same: every key but ``[solver]``, ``[output]`` and ``[render]``
 (a change is refused, naming the key). The solver settings may change; :func:`describe_resume`
 says which ones the resumed run continues with.
+
+A run with a shell body beside solids keeps the same record (:func:`run_meta`,
+:func:`invalid_record`) and one set of state arrays per part (:func:`part_arrays`,
+:func:`part_fields`): :mod:`fem_anim.simulation.joint_checkpoint`.
 """
 
 from __future__ import annotations
@@ -40,7 +44,9 @@ from fem_anim.simulation.hessian_pattern import extra_couplings, restore_couplin
 from fem_anim.simulation.integrators import State
 
 __all__ = ["Checkpoint", "save_checkpoint", "load_checkpoint", "scene_hash", "physics_data",
-           "dof_identity", "describe_resume", "restore_pattern", "NOT_PHYSICS"]
+           "dof_identity", "describe_resume", "restore_pattern", "NOT_PHYSICS", "part_arrays",
+           "part_fields", "run_meta", "write_checkpoint", "read_checkpoint", "invalid_record",
+           "invalid_arrays", "solver_settings"]
 
 FIELDS = ("u", "v", "a", "u_old", "v_old")
 #: Scene tables that do not shape the motion: a resumed run may change them.
@@ -82,7 +88,7 @@ def _changes(old: dict, new: dict) -> list[str]:
 class Checkpoint:
     """What :func:`load_checkpoint` returns."""
 
-    state: State
+    state: State  # a joint run's: a JointState (fem_anim.simulation.joint_loop)
     frame: int
     frames_written: int
     rows: list[dict]
@@ -133,7 +139,7 @@ def _gather_owned(comm: MPI.Comm, local: np.ndarray) -> np.ndarray | None:
     return np.concatenate(parts) if comm.rank == 0 else None
 
 
-def _solver_settings(sim) -> dict:
+def solver_settings(sim) -> dict:
     """The settings a resumed run may change: ``[solver]`` and the merged PETSc options."""
     return {"solver": sim.scene.data.get("solver", {}), "petsc": dict(sim.options)}
 
@@ -154,40 +160,61 @@ def restore_pattern(sim, ck: "Checkpoint") -> None:
                           ck.couplings)
 
 
+def part_arrays(comm: MPI.Comm, V, domain, state: State, prefix: str = "") -> dict:
+    """One part's checkpoint arrays (rank 0; collective): ``{prefix}keys`` (the owned dofs'
+    :func:`dof_identity`) and ``{prefix}u``, ... of :data:`FIELDS` that every rank holds,
+    one row per owned dof block, in rank order."""
+    n_owned = V.dofmap.index_map.size_local
+    bs = V.dofmap.index_map_bs
+    arrays = {f"{prefix}keys": _gather_owned(comm, dof_identity(V, domain)[:n_owned])}
+    for name in FIELDS:
+        values = getattr(state, name)
+        if comm.allreduce(values is not None, op=MPI.LAND):
+            arrays[f"{prefix}{name}"] = _gather_owned(
+                comm, values[: n_owned * bs].reshape(n_owned, bs))
+    return arrays
+
+
+def run_meta(scene, solver: dict, state, frame: int, frames_written: int, rows: list[dict],
+             stepper: dict, shift: float, contact: dict) -> dict:
+    """The record of a run a checkpoint holds besides its arrays (the one-body run's and a
+    joint run's alike; :func:`invalid_record` checks it)."""
+    return {"scene": scene_hash(scene), "physics": physics_data(scene), "solver": solver,
+            "time": state.time, "step": state.step, "frame": frame,
+            "frames_written": frames_written, "stepper": stepper,
+            "every": scene["output"]["every"], "shift": shift, "rows": rows,
+            "contact": contact}
+
+
+def write_checkpoint(path: Path, meta: dict, arrays: dict) -> None:
+    """``meta`` and ``arrays`` into ``path`` as one ``.npz``, atomically (rank 0)."""
+    buffer = io.BytesIO()
+    np.savez(buffer, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
+             **arrays)
+    write_atomically(Path(path), buffer.getvalue())
+
+
 def save_checkpoint(path: Path, sim, state: State, frame: int, frames_written: int,
                     rows: list[dict], stepper: dict) -> None:
     """Write ``path`` (rank 0) with the full state after ``frame`` frames (collective)."""
     comm = sim.comm
     p = sim.problem
     V = p.V
-    n_owned = V.dofmap.index_map.size_local
-    bs = V.dofmap.index_map_bs
-    keys = dof_identity(V, sim.domain)
-    arrays = {"keys": _gather_owned(comm, keys[:n_owned])}
-    for name in FIELDS:
-        values = getattr(state, name)
-        if comm.allreduce(values is not None, op=MPI.LAND):
-            arrays[name] = _gather_owned(comm, values[: n_owned * bs].reshape(n_owned, bs))
+    arrays = part_arrays(comm, V, sim.domain, state)
     if p.mixed:  # Newton's start of the next step keeps the last pressure
         Q = p.fields.Q
         q_owned = Q.dofmap.index_map.size_local
         arrays["p_keys"] = _gather_owned(comm, dof_identity(Q, sim.domain)[:q_owned])
         arrays["p"] = _gather_owned(comm, p.p.x.array[:q_owned].reshape(q_owned, 1))
     if _grows(sim):  # the contact pairs met so far, as the Hessian's pattern holds them
-        arrays["couplings"] = extra_couplings(sim.minimiser.A, V, keys)
+        arrays["couplings"] = extra_couplings(sim.minimiser.A, V, dof_identity(V, sim.domain))
     if comm.rank != 0:
         return
     shift = sim.minimiser.shift.c if sim.minimiser.shift else 0.0
     ipc = p.ipc
-    meta = {"scene": scene_hash(sim.scene), "physics": physics_data(sim.scene),
-            "solver": _solver_settings(sim), "time": state.time, "step": state.step,
-            "frame": frame, "frames_written": frames_written, "stepper": stepper,
-            "every": sim.scene["output"]["every"],
-            "shift": shift, "rows": rows, "contact": ipc.state() if ipc is not None else {}}
-    buffer = io.BytesIO()
-    np.savez(buffer, meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8),
-             **arrays)
-    write_atomically(Path(path), buffer.getvalue())
+    meta = run_meta(sim.scene, solver_settings(sim), state, frame, frames_written, rows,
+                    stepper, shift, ipc.state() if ipc is not None else {})
+    write_checkpoint(path, meta, arrays)
 
 
 def _invalid(meta, data: dict, sim) -> str | None:
@@ -198,14 +225,34 @@ def _invalid(meta, data: dict, sim) -> str | None:
     accepted substeps (one stats row each), with at most k / every + 1 trajectory frames;
     its arrays are one row per dof block of this scene's mesh, all finite.
     """
-    if not isinstance(meta, dict) or meta.get("scene") != scene_hash(sim.scene):
-        changed = _changes(meta.get("physics", {}), physics_data(sim.scene)) \
+    clock = frame_clock(sim.scene)
+    problem = invalid_record(meta, sim.scene, clock.count, clock.step, clock.time)
+    if problem:
+        return problem
+    bs = sim.problem.V.dofmap.index_map_bs
+    shapes = {"keys": (FIELDS, bs)}
+    if sim.problem.mixed:
+        shapes["p_keys"] = (("p",), 1)
+        if "p" not in data:
+            return "its pressure (element.formulation = \"mixed\") is missing"
+    return invalid_arrays(data, shapes)
+
+
+def invalid_record(meta, scene, steps: int, h: float, time_of) -> str | None:
+    """What is wrong with a checkpoint's record (:func:`run_meta`) of a run of ``scene``
+    with frames 0..``steps`` at ``time_of(k)`` reached by steps of at most ``h``, or None.
+
+    The physics must be ``scene``'s (else the message names the changed keys); the record
+    is after frame k, 1 <= k < ``steps``, at its time, after ``step`` accepted substeps
+    (one stats row each), with at most k / every + 1 trajectory frames.
+    """
+    if not isinstance(meta, dict) or meta.get("scene") != scene_hash(scene):
+        changed = _changes(meta.get("physics", {}), physics_data(scene)) \
             if isinstance(meta, dict) and isinstance(meta.get("physics"), dict) else []
         what = f": {'; '.join(changed)}" if changed else ""
         return f"it was written for a different scene (the scene's physics changed{what}; " \
                f"only {', '.join(f'[{t}]' for t in NOT_PHYSICS)} may change on resume)"
-    clock = frame_clock(sim.scene)
-    h, steps, every = clock.step, clock.count, sim.scene["output"]["every"]
+    every = scene["output"]["every"]
     ints = ("step", "frame", "frames_written")
     if not all(type(meta.get(k)) is int for k in ints) or \
             not all(isinstance(meta.get(k), (int, float)) for k in ("time", "shift")) or \
@@ -216,8 +263,8 @@ def _invalid(meta, data: dict, sim) -> str | None:
         every = meta["every"]
     if not 1 <= frame < steps:
         return f"frame {frame} is outside 1..{steps - 1} (the run's last frame is {steps})"
-    if not math.isclose(meta["time"], clock.time(frame), rel_tol=1e-9, abs_tol=1e-9 * h):
-        return f"time {meta['time']!r} is not frame {frame}'s time {clock.time(frame)!r}"
+    if not math.isclose(meta["time"], time_of(frame), rel_tol=1e-9, abs_tol=1e-9 * h):
+        return f"time {meta['time']!r} is not frame {frame}'s time {time_of(frame)!r}"
     if step < frame or len(meta["rows"]) != step:
         return f"step {step} does not match frame {frame} and its {len(meta['rows'])} stats rows"
     if not 1 <= written <= frame // every + 1:
@@ -232,12 +279,17 @@ def _invalid(meta, data: dict, sim) -> str | None:
             isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0
             for v in contact.values()):
         return f"its contact state {contact!r} is not a table of finite numbers >= 0"
-    bs = sim.problem.V.dofmap.index_map_bs
-    shapes = {"keys": (FIELDS, bs)}
-    if sim.problem.mixed:
-        shapes["p_keys"] = (("p",), 1)
-        if "p" not in data:
-            return "its pressure (element.formulation = \"mixed\") is missing"
+    return None
+
+
+def invalid_arrays(data: dict, shapes: dict[str, tuple[tuple[str, ...], int]]) -> str | None:
+    """What is wrong with a checkpoint's arrays, or None.
+
+    Args:
+        data: The arrays by name.
+        shapes: For each key array's name, the names of the arrays with one row per key
+            and their width; the first three names (u, v, a) must be present.
+    """
     for key_name, (names, width) in shapes.items():
         keys = data.get(key_name)
         if keys is None or keys.ndim != 1 or keys.dtype != np.int64:
@@ -249,8 +301,9 @@ def _invalid(meta, data: dict, sim) -> str | None:
                     return f"array {name} has shape {a.shape}, not ({keys.size}, {width})"
                 if not np.all(np.isfinite(a)):
                     return f"array {name} holds non-finite values"
-    if not all(name in data for name in ("u", "v", "a")):
-        return "its state arrays u, v, a are incomplete"
+    for names, _ in shapes.values():
+        if len(names) >= 3 and not all(name in data for name in names[:3]):
+            return f"its state arrays {', '.join(names[:3])} are incomplete"
     couplings = data.get("couplings")
     if couplings is not None and (couplings.ndim != 2 or couplings.shape[1] != 2
                                   or couplings.dtype != np.int64):
@@ -274,16 +327,19 @@ def _rows_of(stored: np.ndarray, local: np.ndarray, comm: MPI.Comm, path: Path) 
     return order[where]
 
 
-def load_checkpoint(path: Path, sim) -> Checkpoint:
-    """Read ``path`` on every rank and pick this partition's dofs by their keys (collective).
+def read_checkpoint(path: Path, comm: MPI.Comm, check) -> tuple[dict, dict]:
+    """The record and arrays of ``path``, read on every rank (collective).
+
+    Args:
+        path: The checkpoint file.
+        comm: The communicator.
+        check: ``check(meta, data)``: what is wrong with them, or None.
 
     Raises:
-        FemAnimError: if the file is missing or unreadable, was written for another
-            scene (naming the physics keys that changed) or mesh, or holds an impossible
-            record (``_invalid``).
+        FemAnimError: (on every rank) if the file is missing or unreadable or ``check``
+            finds a fault.
     """
-    comm = sim.comm
-    error, data = None, None
+    error, data, meta = None, None, None
     try:
         with np.load(path) as npz:
             data = {k: npz[k] for k in npz.files}
@@ -293,15 +349,36 @@ def load_checkpoint(path: Path, sim) -> Checkpoint:
     except Exception as err:  # a corrupt file: np.load raises many types
         error = f"checkpoint {path} cannot be read: {err}"
     else:
-        problem = _invalid(meta, data, sim)
+        problem = check(meta, data)
         if problem:
             error = f"checkpoint {path} is not valid: {problem}; nothing was resumed"
     if comm.allreduce(error is not None, op=MPI.LOR):  # collective: every rank raises
         message = comm.bcast(error, root=0)
         raise FemAnimError(message or "the checkpoint could not be read on every process")
+    return meta, data
+
+
+def part_fields(data: dict, V, domain, comm: MPI.Comm, path: Path,
+                prefix: str = "") -> dict[str, np.ndarray | None]:
+    """This partition's local dof values (ghosts included) of each of :data:`FIELDS` saved
+    by :func:`part_arrays` (None where not saved), picked by their keys (collective)."""
+    rows = _rows_of(data[f"{prefix}keys"], dof_identity(V, domain), comm, path)
+    return {name: data[f"{prefix}{name}"][rows].ravel() if f"{prefix}{name}" in data
+            else None for name in FIELDS}
+
+
+def load_checkpoint(path: Path, sim) -> Checkpoint:
+    """Read ``path`` on every rank and pick this partition's dofs by their keys (collective).
+
+    Raises:
+        FemAnimError: if the file is missing or unreadable, was written for another
+            scene (naming the physics keys that changed) or mesh, or holds an impossible
+            record (``_invalid``).
+    """
+    comm = sim.comm
+    meta, data = read_checkpoint(path, comm, lambda meta, data: _invalid(meta, data, sim))
     p = sim.problem
-    rows = _rows_of(data["keys"], dof_identity(p.V, sim.domain), comm, path)
-    fields = {name: data[name][rows].ravel() if name in data else None for name in FIELDS}
+    fields = part_fields(data, p.V, sim.domain, comm, path)
     pressure = None
     if p.mixed:
         pressure = data["p"][_rows_of(data["p_keys"], dof_identity(p.fields.Q, sim.domain),
@@ -328,7 +405,7 @@ def describe_resume(ck: Checkpoint, sim, path: Path) -> str:
     where = f"resuming {path} at frame {ck.frame} of {steps} (t = {ck.state.time:.6g} s)"
     if not ck.solver:
         return f"{where} (its checkpoint does not record the solver settings)"
-    now = _solver_settings(sim)
+    now = solver_settings(sim)
     changed = _changes({"solver": ck.solver.get("solver", {})}, {"solver": now["solver"]}) + \
         _changes({"petsc": ck.solver.get("petsc", {})}, {"petsc": now["petsc"]})
     if not changed:

@@ -15,32 +15,68 @@ of no common cell, as pairs of dof identities
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_anim import compat
 
-__all__ = ["extra_couplings", "restore_couplings"]
+__all__ = ["Blocks", "blocks_of", "extra_couplings", "restore_couplings"]
 
 
-def _global_blocks(V) -> np.ndarray:
-    """The global block index of each local dof block (owned and ghost)."""
+@dataclass
+class Blocks:
+    """The unknown's dof blocks as a Hessian's pattern sees them (this rank's).
+
+    Attributes:
+        bs: Dofs per block.
+        size_global: The number of blocks of the unknown (all ranks).
+        global_blocks: The global block of each local block (owned and ghost).
+        owned: The local blocks this rank owns.
+        cells: For each kind of cell, its local blocks (one row per cell): the couplings
+            the cells make.
+    """
+
+    bs: int
+    size_global: int
+    global_blocks: np.ndarray
+    owned: np.ndarray
+    cells: list[np.ndarray]
+
+
+def blocks_of(V) -> Blocks:
+    """The :class:`Blocks` of a DOLFINx space, or ``V`` itself if it is one already."""
+    if isinstance(V, Blocks):
+        return V
     index_map = V.dofmap.index_map
     n = index_map.size_local + index_map.num_ghosts
-    return np.asarray(index_map.local_to_global(np.arange(n, dtype=np.int32)), np.int64)
+    return Blocks(V.dofmap.index_map_bs, index_map.size_global,
+                  np.asarray(index_map.local_to_global(np.arange(n, dtype=np.int32)), np.int64),
+                  np.arange(index_map.size_local), [compat.cell_dofs(V)])
 
 
-def _block_key_table(comm: MPI.Comm, V, keys: np.ndarray) -> np.ndarray | None:
+def _block_key_table(comm: MPI.Comm, blocks: Blocks, keys: np.ndarray) -> np.ndarray | None:
     """Rank 0: the dof identity of every global block (an array indexed by global block)."""
-    n_owned = V.dofmap.index_map.size_local
-    parts = comm.gather((_global_blocks(V)[:n_owned], keys[:n_owned]), root=0)
+    parts = comm.gather((blocks.global_blocks[blocks.owned], keys[blocks.owned]), root=0)
     if comm.rank != 0:
         return None
-    table = np.empty(V.dofmap.index_map.size_global, np.int64)
-    for blocks, values in parts:
-        table[blocks] = values
+    table = np.empty(blocks.size_global, np.int64)
+    for where, values in parts:
+        table[where] = values
     return table
+
+
+def _cell_pairs(blocks: Blocks) -> np.ndarray:
+    """Every (row, column) global block pair a cell couples, as row * size_global + column."""
+    n_global, made = blocks.size_global, []
+    for cells in blocks.cells:
+        cell_blocks = blocks.global_blocks[cells]
+        k = cell_blocks.shape[1]
+        made.append((cell_blocks[:, :, None] * n_global
+                     + cell_blocks[:, None, :]).reshape(-1, k * k).ravel())
+    return np.unique(np.concatenate(made))
 
 
 def extra_couplings(A: PETSc.Mat, V, keys: np.ndarray) -> np.ndarray | None:
@@ -48,8 +84,9 @@ def extra_couplings(A: PETSc.Mat, V, keys: np.ndarray) -> np.ndarray | None:
 
     Args:
         A: The assembled Hessian (AIJ, unknown = the displacement space ``V``).
-        V: Its space.
-        keys: :func:`~fem_anim.simulation.checkpoint.dof_identity` of ``V``.
+        V: Its space, or the :class:`Blocks` of a joint unknown.
+        keys: :func:`~fem_anim.simulation.checkpoint.dof_identity` of ``V`` (one per local
+            block).
 
     Returns:
         On rank 0, an (n, 2) int64 array of (row, column) dof identities, sorted; None
@@ -58,18 +95,14 @@ def extra_couplings(A: PETSc.Mat, V, keys: np.ndarray) -> np.ndarray | None:
     comm = A.getComm().tompi4py()
     if not A.assembled:  # no Newton iteration yet: nothing grew
         return np.zeros((0, 2), np.int64) if comm.rank == 0 else None
-    bs = V.dofmap.index_map_bs
-    n_global = V.dofmap.index_map.size_global
+    blocks = blocks_of(V)
+    bs, n_global = blocks.bs, blocks.size_global
     indptr, cols, _ = A.getValuesCSR()
     start = A.getOwnershipRange()[0]
     rows = start + np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
     pairs = np.unique((rows // bs).astype(np.int64) * n_global + cols // bs)
-    cell_blocks = _global_blocks(V)[compat.cell_dofs(V)]
-    k = cell_blocks.shape[1]
-    made = np.unique((cell_blocks[:, :, None] * n_global
-                      + cell_blocks[:, None, :]).reshape(-1, k * k))
-    extra = pairs[~np.isin(pairs, made)]
-    table = _block_key_table(comm, V, keys)
+    extra = pairs[~np.isin(pairs, _cell_pairs(blocks))]
+    table = _block_key_table(comm, blocks, keys)
     parts = comm.gather(extra, root=0)
     if comm.rank != 0:
         return None
@@ -97,7 +130,7 @@ def restore_couplings(A: PETSc.Mat, V, keys: np.ndarray, couplings: np.ndarray |
 
     Args:
         A: A new run's Hessian, not yet assembled (it must accept new nonzeros).
-        V: Its space.
+        V: Its space, or the :class:`Blocks` of a joint unknown.
         keys: :func:`~fem_anim.simulation.checkpoint.dof_identity` of ``V`` on this run.
         couplings: Rank 0's (row, column) dof identities; None elsewhere.
 
@@ -105,12 +138,14 @@ def restore_couplings(A: PETSc.Mat, V, keys: np.ndarray, couplings: np.ndarray |
         KeyError: (on every rank) an identity that is not a dof of this mesh.
     """
     comm = A.getComm().tompi4py()
-    bs = V.dofmap.index_map_bs
-    cell_blocks = _global_blocks(V)[compat.cell_dofs(V)]
-    k = cell_blocks.shape[1]
-    _insert_zeros(A, np.stack([cell_blocks.repeat(k, 1).ravel(),
-                               np.tile(cell_blocks, (1, k)).ravel()], axis=1), bs)
-    table = _block_key_table(comm, V, keys)
+    blocks = blocks_of(V)
+    bs = blocks.bs
+    for cells in blocks.cells:
+        cell_blocks = blocks.global_blocks[cells]
+        k = cell_blocks.shape[1]
+        _insert_zeros(A, np.stack([cell_blocks.repeat(k, 1).ravel(),
+                                   np.tile(cell_blocks, (1, k)).ravel()], axis=1), bs)
+    table = _block_key_table(comm, blocks, keys)
     missing = False
     if comm.rank == 0 and couplings is not None and couplings.size:
         order = np.argsort(table)

@@ -25,11 +25,18 @@ directory whose files are installed only when the run succeeds
 
 With ``output.usd`` the run also writes ``<scene>.usdc`` (the solids' boundaries and the
 cloth, one mesh per body: :mod:`fem_anim.export.usd_stage`), which ``fem-anim export``
-writes from a finished run too. Not done for such a run yet: checkpoints and ``--resume``.
+writes from a finished run too.
+
+Like a one-mesh run it writes ``checkpoint.npz`` every ``output.checkpoint_every`` frames
+(:mod:`fem_anim.simulation.joint_checkpoint`), stops at the end of a frame on SIGINT, SIGTERM
+or SIGHUP with a checkpoint there (a second signal stops it at once:
+:mod:`fem_anim.simulation.interrupt`), and ``--resume`` continues it (:doc:`/resume`).
 """
 
 from __future__ import annotations
 
+import signal
+import sys
 from pathlib import Path
 
 from types import SimpleNamespace
@@ -37,7 +44,7 @@ from types import SimpleNamespace
 import numpy as np
 from mpi4py import MPI
 
-from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.errors import FemAnimError, Interrupted, describe_os_error
 from fem_anim.export.usd_stage import export_staged_run, usd_file_name
 from fem_anim.output.files import (CellGather, RunDirectory, StatsWriter, VertexGather,
                                    write_final, write_scene)
@@ -45,6 +52,10 @@ from fem_anim.output.trajectory import TrajectoryWriter
 from fem_anim.scene.loading import Scene
 from fem_anim.simulation.energy_report import energy_report, roundoff_energy, write_summary
 from fem_anim.simulation.adaptive import AdaptiveStepper
+from fem_anim.simulation.checkpoint import describe_resume
+from fem_anim.simulation.interrupt import Interrupts, stop_at_once
+from fem_anim.simulation.joint_checkpoint import (load_joint_checkpoint, restore_joint,
+                                                  save_joint_checkpoint, solver_view)
 from fem_anim.simulation.joint_loop import JointSimulation, JointState
 
 __all__ = ["PART_FILES", "run_joint", "surface_of_parts"]
@@ -100,8 +111,9 @@ def _io(comm: MPI.Comm, path: Path, write, *args):
 
 def run_joint(scene: Scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD,
               cli_options: dict[str, str] | None = None, quiet: bool = False,
-              provenance: dict | None = None,
-              preset: str | None = None) -> tuple[list[dict], dict]:
+              provenance: dict | None = None, preset: str | None = None,
+              resume: bool = False,
+              sim: JointSimulation | None = None) -> tuple[list[dict], dict]:
     """Run a scene with a shell body for ``time.steps`` steps, writing ``out`` (collective).
 
     Args:
@@ -112,18 +124,26 @@ def run_joint(scene: Scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD,
         quiet: No notes on stderr.
         provenance: Extra entries of ``summary.json`` (software versions).
         preset: A linear-solver preset replacing ``solver.preset`` (``--solver``).
+        resume: Continue the unfinished run staged in ``out`` from its last checkpoint
+            (:mod:`fem_anim.simulation.joint_checkpoint`).
+        sim: The scene's simulation, built already (by the command line, under
+            :class:`~fem_anim.simulation.interrupt.stop_at_once`); None: built here.
 
     Returns:
         The stats rows and the energy report.
 
     Raises:
         ConvergenceError: a step did not converge (the directory keeps its previous
-            results; the staged frames so far stay in ``out/.partial``).
-        FemAnimError: an output file cannot be written.
+            results; the staged frames so far and the last checkpoint stay in
+            ``out/.partial``, for ``--resume``).
+        Interrupted: after SIGINT, SIGTERM or SIGHUP, at the end of a frame, once its
+            checkpoint is written (a second signal: at once;
+            :mod:`fem_anim.simulation.interrupt`).
+        FemAnimError: an output file cannot be written, or a checkpoint to resume from is
+            missing, unreadable or of another scene (naming the physics keys that changed).
     """
-    sim = JointSimulation.from_scene(scene, comm, cli_options, preset)
-    dt = float(scene["time"]["dt"])
-    steps, every = int(scene["time"]["steps"]), int(scene["output"]["every"])
+    if sim is None:
+        sim = JointSimulation.from_scene(scene, comm, cli_options, preset)
     gathers = [(VertexGather(d, p.V), CellGather(d)) for d, p in zip(sim.domains, sim.parts)]
 
     def fields(states):
@@ -145,61 +165,118 @@ def run_joint(scene: Scene, out: Path, comm: MPI.Comm = MPI.COMM_WORLD,
         return (np.concatenate([u for u, _ in parts]),
                 np.concatenate([e[k] for (_, e), k in zip(parts, parents)]))
 
-    states = sim.initial_state()
-    initial = sim.energies(states)
-    initial["roundoff"] = sum(roundoff_energy(s, d) for s, d in zip(sim.scenes, sim.domains))
-    run_dir = RunDirectory(Path(out), comm)
-    rows: list[dict] = []
-    try:
-        writers = [_io(comm, run_dir.file(f"{name}.h5"), TrajectoryWriter,
-                       run_dir.file(f"{name}.xdmf"), d)
-                   for name, d in zip(PART_FILES + ("trajectory",),
-                                      sim.domains + [surface])]
-        stats_file = _io(comm, run_dir.file("stats.csv"), StatsWriter,
-                         run_dir.file("stats.csv"), comm)
-        try:
-            parts = fields(states)
-            for writer, (u, e) in zip(writers, parts + [seen(parts)]):
-                _io(comm, writer.h5_path, writer.write, 0.0, u, e)
-            stepper = AdaptiveStepper(sim, dt, scene["time"])
-            state = JointState(states)
-            for frame in range(1, steps + 1):
-                for state, row in stepper.advance(state, frame * dt):
-                    rows.append(row)
-                    _io(comm, stats_file.path, stats_file.write, row)
-                if frame % every == 0 or frame == steps:
-                    parts = fields(state.parts)
-                    for writer, (u, e) in zip(writers, parts + [seen(parts)]):
-                        _io(comm, writer.h5_path, writer.write, frame * dt, u, e)
-            states = state.parts
-        finally:
-            stats_file.close()
-        finals = fields(states)
-        _io(comm, writers[-1].h5_path, writers[-1].finish)
-        for name, writer, d, (u, e) in zip(PART_FILES, writers, sim.domains, finals):
-            _io(comm, writer.h5_path, writer.finish)
-            path = run_dir.file(f"final_{name}.vtu")
-            _io(comm, path, write_final, path, d, u, e)
-        _io(comm, run_dir.file("scene.json"), write_scene, run_dir.file("scene.json"),
-            scene, comm)
-        report = energy_report(rows, initial, scene)
-        path = run_dir.file("summary.json")
+    with stop_at_once():  # nothing to keep yet
+        states = sim.initial_state()
+        initial = sim.energies(states)
+        initial["roundoff"] = sum(roundoff_energy(s, d)
+                                  for s, d in zip(sim.scenes, sim.domains))
+    run_dir = RunDirectory(Path(out), comm, resume)
+    try:  # nothing is deleted on failure: the staging area is what --resume continues
+        with Interrupts(comm) as interrupts:
+            try:
+                states, rows, writers = _frames(sim, scene, run_dir, states, fields, seen,
+                                                surface, quiet, resume, interrupts)
+                finals = fields(states)
+                _io(comm, writers[-1].h5_path, writers[-1].finish)
+                for name, writer, d, (u, e) in zip(PART_FILES, writers, sim.domains, finals):
+                    _io(comm, writer.h5_path, writer.finish)
+                    path = run_dir.file(f"final_{name}.vtu")
+                    _io(comm, path, write_final, path, d, u, e)
+                _io(comm, run_dir.file("scene.json"), write_scene, run_dir.file("scene.json"),
+                    scene, comm)
+                report = energy_report(rows, initial, scene)
+                path = run_dir.file("summary.json")
 
-        def summary() -> None:
-            if comm.rank == 0:
-                write_summary(path, scene, rows, report,
-                              (provenance or {}) | {"petsc_options": sim.options})
+                def summary() -> None:
+                    if comm.rank == 0:
+                        write_summary(path, scene, rows, report,
+                                      (provenance or {}) | {"petsc_options": sim.options})
 
-        _io(comm, path, summary)
-        if scene["output"]["usd"]:  # installed with the run's other files
-            _io(comm, run_dir.file(usd_file_name(scene.name)), export_staged_run,
-                run_dir.staging, scene.name, comm, int(scene["output"]["start_frame"]))
+                _io(comm, path, summary)
+                if scene["output"]["usd"]:  # installed with the run's other files
+                    _io(comm, run_dir.file(usd_file_name(scene.name)), export_staged_run,
+                        run_dir.staging, scene.name, comm, int(scene["output"]["start_frame"]))
+            except FemAnimError as err:
+                if interrupts.received is None or isinstance(err, Interrupted):
+                    raise
+                name = signal.Signals(interrupts.received).name  # a 2nd signal inside PETSc
+                raise Interrupted(f"interrupted by {name} (twice)",
+                                  interrupts.received) from None
         run_dir.commit()
     finally:
         run_dir.close()
     if scene["output"]["render"]:
         _render(comm, Path(out), scene["render"], quiet)
     return rows, report
+
+
+def _frames(sim, scene: Scene, run_dir: RunDirectory, states, fields, seen, surface,
+            quiet: bool, resume: bool, interrupts: Interrupts):
+    """The frames of :func:`run_joint` with their files: stats rows, the three
+    trajectories' frames every ``output.every`` frames, a checkpoint every
+    ``output.checkpoint_every`` frames and at a signal (collective).
+
+    Returns:
+        The parts' final states, the stats rows and the trajectory writers (solids, shell,
+        seen surface).
+
+    Raises:
+        Interrupted: after a signal, at the end of a frame, once its checkpoint is written.
+    """
+    comm = sim.comm
+    dt = float(scene["time"]["dt"])
+    steps, every = int(scene["time"]["steps"]), int(scene["output"]["every"])
+    checkpoint_every = scene["output"]["checkpoint_every"] or max(1, steps // 10)
+    stepper = AdaptiveStepper(sim, dt, scene["time"])
+    first, rows, kept, ck = 1, [], None, None
+    if resume:  # before any file is opened: a refused resume changes nothing
+        ck = load_joint_checkpoint(run_dir.file("checkpoint.npz"), sim, scene)
+        first, rows, kept = ck.frame + 1, ck.rows, ck.frames_written
+        restore_joint(sim, stepper, ck)
+        state = ck.state
+    else:
+        state = JointState(states)
+    writers = [_io(comm, run_dir.file(f"{name}.h5"), TrajectoryWriter,
+                   run_dir.file(f"{name}.xdmf"), d, kept)
+               for name, d in zip(PART_FILES + ("trajectory",), sim.domains + [surface])]
+    stats_file = _io(comm, run_dir.file("stats.csv"), StatsWriter,
+                     run_dir.file("stats.csv"), comm, rows)
+
+    def checkpoint(frame: int) -> None:
+        path = run_dir.file("checkpoint.npz")
+        _io(comm, path, save_joint_checkpoint, path, sim, scene, state, frame,
+            len(writers[0].times) if writers[0].rank0 else 0, rows,
+            {"dt": stepper.dt, "last_dt": stepper.last_dt})
+
+    if ck is not None and comm.rank == 0:
+        line = describe_resume(ck, solver_view(sim, scene), run_dir.path)
+        if not quiet or "with changed solver settings" in line:
+            print(f"fem-anim: {line}", file=sys.stderr)
+    try:
+        if not resume:
+            parts = fields(state.parts)
+            for writer, (u, e) in zip(writers, parts + [seen(parts)]):
+                _io(comm, writer.h5_path, writer.write, 0.0, u, e)
+        for frame in range(first, steps + 1):
+            for state, row in stepper.advance(state, frame * dt):
+                rows.append(row)
+                _io(comm, stats_file.path, stats_file.write, row)
+            if frame % every == 0 or frame == steps:
+                parts = fields(state.parts)
+                for writer, (u, e) in zip(writers, parts + [seen(parts)]):
+                    _io(comm, writer.h5_path, writer.write, frame * dt, u, e)
+            saved = frame % checkpoint_every == 0 and frame < steps
+            if saved:
+                checkpoint(frame)
+            signum = interrupts.pending() if frame < steps else None
+            if signum:
+                if not saved:
+                    checkpoint(frame)
+                raise Interrupted(f"interrupted by {signal.Signals(signum).name} at frame "
+                                  f"{frame} of {steps} (t = {state.time:.6g} s)", signum)
+    finally:
+        stats_file.close()
+    return state.parts, rows, writers
 
 
 def _render(comm: MPI.Comm, path: Path, settings: dict, quiet: bool) -> None:

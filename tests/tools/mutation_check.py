@@ -1777,6 +1777,34 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_tunnelling.py::test_a_small_cloth_thrown_into_a_cube_stays_outside",),
              "a light cloth at rest on a soft cube: its converged step (a Newton step of "
              "4.5e-9 m, g unresolvable) raised ConvergenceError"),
+    Mutation("joint-resume-drops-kappa", "fem_anim/simulation/joint_checkpoint.py",
+             "    sim.problem.ipc.restore(ck.contact)\n", "    pass\n",
+             ("tests/test_joint_resume.py::test_interrupted_joint_run_resumes_bit_for_bit[2]",),
+             "the joint barrier's adaptive stiffness restarts from its floor 0 on resume"),
+    Mutation("joint-resume-drops-shell-v", "fem_anim/simulation/joint_checkpoint.py",
+             "        arrays |= part_arrays(comm, part.V, domain, s, _prefix(k))",
+             "        arrays |= part_arrays(comm, part.V, domain, s if k == 0 else State(\n"
+             "            s.u, 0.0 * s.v, s.a, s.u_old, s.v_old, s.time, s.step), _prefix(k))",
+             ("tests/test_joint_resume.py::test_interrupted_joint_run_resumes_bit_for_bit[2]",),
+             "the shell's velocity saved as zero: the resumed cloth starts its step at rest"),
+    Mutation("joint-resume-drops-pattern", "fem_anim/simulation/joint_checkpoint.py",
+             "            restore_couplings(sim.minimiser.A, blocks, keys, ck.couplings)",
+             "            restore_couplings(sim.minimiser.A, blocks, keys, None)",
+             ("tests/test_joint_resume.py::test_interrupted_joint_run_resumes_bit_for_bit[2]",),
+             "the joint Hessian's pattern grown by earlier contact pairs not restored: the "
+             "direct solver rounds differently"),
+    Mutation("joint-resume-frame-count-off", "fem_anim/simulation/joint_run.py",
+             "            len(writers[0].times) if writers[0].rank0 else 0, rows,",
+             "            len(writers[0].times) - 1 if writers[0].rank0 else 0, rows,",
+             ("tests/test_joint_resume.py::test_interrupted_joint_run_resumes_bit_for_bit[2]",),
+             "the checkpoint counts one trajectory frame too few: the resumed trajectories "
+             "lack the frame of the interruption"),
+    Mutation("joint-signal-not-checkpointed", "fem_anim/simulation/joint_run.py",
+             "                if not saved:\n                    checkpoint(frame)\n",
+             "                pass\n",
+             ("tests/test_joint_resume.py::test_interrupted_joint_run_resumes_bit_for_bit[2]",),
+             "a signal off the checkpoint beat stops the run without a checkpoint at its "
+             "frame: the resume repeats frame 3 from frame 2's checkpoint"),
 ]
 
 
