@@ -47,6 +47,7 @@ drives its own SNES) and merges the blocked assemblers (fem_anim assembles one s
 from __future__ import annotations
 
 import os
+import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -500,9 +501,18 @@ def _lock_path(cache_dir, module_name: str) -> Path:
     return Path(cache_dir).expanduser().resolve().joinpath(module_name).with_suffix(".c")
 
 
+#: Seconds a compile waits for another process compiling the same module (FFCx and DOLFINx
+#: wait 10 s, then fail with "JIT compilation timed out"; a large module takes minutes:
+#: docs/cloth.md, "DOLFINx 0.9"). Two runs started together on a cold cache, or two test
+#: workers, compile the same module at once.
+JIT_WAIT_S = 1800
+
+
 def _get_cached_module_recording(module_name, object_names, cache_dir, timeout):
-    """FFCx's ``get_cached_module`` that records the locks this process takes, and first
-    restores the lock of a module left ready without one.
+    """FFCx's ``get_cached_module`` that records the locks this process takes, first
+    restores the lock of a module left ready without one, and waits :data:`JIT_WAIT_S`
+    (at least ``timeout``) for another process compiling the module, saying so in one line
+    on standard error.
 
     FFCx treats ``<module>.c`` as the lock and ``<module>.c.cached`` as "ready". A module
     with ``.c.cached`` but no ``.c`` (its lock renamed by someone else while it compiled) is
@@ -522,8 +532,12 @@ def _get_cached_module_recording(module_name, object_names, cache_dir, timeout):
         except OSError:
             pass
     existed = lock.exists()
+    wait = max(int(timeout), JIT_WAIT_S)
+    if existed and not lock.with_suffix(".c.cached").exists():
+        print(f"fem-anim: waiting up to {wait} s for another process compiling {lock.name} "
+              f"(if none is running, remove {lock})", file=sys.stderr, flush=True)
     try:
-        obj, module = _FFCX_GET_CACHED_MODULE(module_name, object_names, cache_dir, timeout)
+        obj, module = _FFCX_GET_CACHED_MODULE(module_name, object_names, cache_dir, wait)
     except BaseException:
         if not existed and lock.exists():
             _OWN_JIT_LOCKS.add(str(lock))

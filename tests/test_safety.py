@@ -610,6 +610,47 @@ def test_a_module_ready_without_its_lock_loads_instead_of_failing(tmp_path):
     assert abs(fem.assemble_scalar(form) - 0.5) < 1e-12
 
 
+def test_a_compile_waits_for_another_process_compiling_the_same_module(tmp_path, monkeypatch,
+                                                                        capsys):
+    """Two processes compiling one module on a cold cache (two runs started together, two
+    test workers): the second finds the first's lock and waits for ``.c.cached``. FFCx and
+    DOLFINx give up after 10 s ("JIT compilation timed out"), and a large module compiles
+    for minutes; the wait is now ``compat.JIT_WAIT_S``, announced in one line. The other
+    process is simulated: the module compiled, its ``.c.cached`` held back, and FFCx's
+    one-second sleeps counted (no real waiting) until the 30th puts it back."""
+    import ffcx.codegeneration.jit as ffcx_codegen
+    import ufl
+    from dolfinx import fem, mesh
+    from mpi4py import MPI
+
+    from fem_anim import compat
+
+    cache = tmp_path / "cache"
+    domain = mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
+    functional = ufl.SpatialCoordinate(domain)[0] * ufl.dx(domain=domain)
+
+    def compile_once():
+        return compat.compile_forms_together({"b": functional}, {"cache_dir": str(cache)})
+
+    compile_once()
+    lock, = cache.glob("libffcx_forms_*.c")
+    ready = lock.with_suffix(".c.cached")
+    held = ready.rename(tmp_path / "held")  # "still compiling": a lock, no .c.cached
+    sleeps = []
+
+    def other_process_compiling(seconds):
+        sleeps.append(seconds)
+        if len(sleeps) == 30:
+            held.rename(ready)
+
+    monkeypatch.setattr(ffcx_codegen.time, "sleep", other_process_compiling)
+    form = compile_once()["b"]
+    assert len(sleeps) == 30
+    assert abs(fem.assemble_scalar(form) - 0.5) < 1e-12
+    assert f"waiting up to {compat.JIT_WAIT_S} s for another process compiling " \
+        f"{lock.name}" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_while_compiling_leaves_no_jit_lock(tmp_path, sig):
     """Stopped while FFCx compiles the forms (a fresh cache), the run ends with one line and

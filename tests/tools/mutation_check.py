@@ -1805,6 +1805,14 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_joint_resume.py::test_interrupted_joint_run_resumes_bit_for_bit[2]",),
              "a signal off the checkpoint beat stops the run without a checkpoint at its "
              "frame: the resume repeats frame 3 from frame 2's checkpoint"),
+    # -- a compile waits for another process compiling the same module --------------------
+    Mutation("jit-wait-ffcx-default", "fem_anim/compat.py",
+             "    wait = max(int(timeout), JIT_WAIT_S)",
+             "    wait = int(timeout)",
+             ("tests/test_safety.py::"
+              "test_a_compile_waits_for_another_process_compiling_the_same_module",),
+             "two processes compiling one module on a cold cache: the second gave up after "
+             "FFCx's 10 s (\"JIT compilation timed out\")"),
 ]
 
 
