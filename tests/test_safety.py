@@ -583,24 +583,29 @@ def test_an_interruption_between_ffcx_lock_and_compile_leaves_no_lock(tmp_path):
     assert done.exists() and old.exists() and other.exists()
 
 
+def _small_module(cache):
+    """A function compiling one small functional (int x dx over the unit square, 0.5) into
+    the JIT cache ``cache`` through ``compat.compile_forms_together``; it returns the Forms."""
+    import ufl
+    from dolfinx import mesh
+    from mpi4py import MPI
+
+    from fem_anim import compat
+
+    domain = mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
+    functional = ufl.SpatialCoordinate(domain)[0] * ufl.dx(domain=domain)
+    return lambda: compat.compile_forms_together({"b": functional}, {"cache_dir": str(cache)})
+
+
 def test_a_module_ready_without_its_lock_loads_instead_of_failing(tmp_path):
     """A module whose lock was renamed while it compiled ends with ``.c.cached`` and no ``.c``:
     FFCx alone then recompiles it and fails on the existing ``.c.cached``
     (``FileExistsError``, seen on Debian 13's CI), every time. The lock is put back and the
     ready module loads."""
-    import ufl
-    from dolfinx import fem, mesh
-    from mpi4py import MPI
-
-    from fem_anim import compat
+    from dolfinx import fem
 
     cache = tmp_path / "cache"
-    domain = mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
-    functional = ufl.SpatialCoordinate(domain)[0] * ufl.dx(domain=domain)
-
-    def compile_once():
-        return compat.compile_forms_together({"b": functional}, {"cache_dir": str(cache)})
-
+    compile_once = _small_module(cache)
     compile_once()
     lock, = cache.glob("libffcx_forms_*.c")
     assert lock.with_suffix(".c.cached").exists()
@@ -619,19 +624,12 @@ def test_a_compile_waits_for_another_process_compiling_the_same_module(tmp_path,
     process is simulated: the module compiled, its ``.c.cached`` held back, and FFCx's
     one-second sleeps counted (no real waiting) until the 30th puts it back."""
     import ffcx.codegeneration.jit as ffcx_codegen
-    import ufl
-    from dolfinx import fem, mesh
-    from mpi4py import MPI
+    from dolfinx import fem
 
     from fem_anim import compat
 
     cache = tmp_path / "cache"
-    domain = mesh.create_unit_square(MPI.COMM_SELF, 2, 2)
-    functional = ufl.SpatialCoordinate(domain)[0] * ufl.dx(domain=domain)
-
-    def compile_once():
-        return compat.compile_forms_together({"b": functional}, {"cache_dir": str(cache)})
-
+    compile_once = _small_module(cache)
     compile_once()
     lock, = cache.glob("libffcx_forms_*.c")
     ready = lock.with_suffix(".c.cached")
