@@ -86,6 +86,9 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         self.ufl_objective = terms.objective
         self.ufl_elastic = terms.elastic_u
         self.assembly_s = 0.0  # wall time spent assembling (objective, residual, Jacobian)
+        self._blocked = {}  # form id -> its block (BAIJ) matrix (assemble_form_matrix)
+        #: Hessians assembled through a block matrix (Matrices.assemble_form_matrix)
+        self.blocked_assemblies = 0
         start = time.perf_counter()
         compiled = compile_forms(ufl_forms)
         #: Wall time of the form compilation (FFCx + gcc, or a load from the JIT cache).
@@ -398,7 +401,7 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         if self.hessian_filter is not None:
             self.tangent_data.update()
         A.zeroEntries()
-        fem_petsc.assemble_matrix(A, self._active_jacobian, self.bcs)
+        self.assemble_form_matrix(A, self._active_jacobian)
         if self.ipc is not None:
             A.assemble(PETSc.Mat.AssemblyType.FLUSH)
             self.ipc.add_hessian(A, float(self.weight.value))
