@@ -1813,6 +1813,21 @@ MUTATIONS: list[Mutation] = [
               "test_a_compile_waits_for_another_process_compiling_the_same_module",),
              "two processes compiling one module on a cold cache: the second gave up after "
              "FFCx's 10 s (\"JIT compilation timed out\")"),
+    # -- the Hessian form assembled through a d x d block matrix -------------------------
+    Mutation("blocked-assembly-off", "fem_anim/problem/matrices.py",
+             "BLOCKED_ASSEMBLY = True",
+             "BLOCKED_ASSEMBLY = False",
+             ("tests/test_blocked_assembly.py::"
+              "test_blocked_hessian_equals_the_direct_one_and_keeps_the_pattern",),
+             "the Hessian form inserted entry by entry into the AIJ matrix again: 2x the "
+             "assembly time on the pile"),
+    Mutation("blocked-assembly-new-pattern", "fem_anim/problem/matrices.py",
+             "A.axpy(1.0, B, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)",
+             "A.axpy(1.0, B, PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)",
+             ("tests/test_blocked_assembly.py::"
+              "test_blocked_hessian_equals_the_direct_one_and_keeps_the_pattern",),
+             "the block matrix added as of a different pattern: PETSc rebuilds the Hessian's "
+             "pattern and MUMPS redoes its symbolic analysis at every Newton iteration"),
 ]
 
 
