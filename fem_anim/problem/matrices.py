@@ -52,7 +52,8 @@ class Matrices:
 
     def assemble_form_matrix(self, A: PETSc.Mat, form) -> None:
         """Add the Hessian form ``form`` (pins as identity rows) into the zeroed matrix ``A``
-        (collective); ``A`` is left assembled for adding (flushed or final).
+        (collective); ``A`` is left assembled for adding (flushed or final). A matrix
+        never assembled is filled by a direct assembly first (its pattern).
 
         For an AIJ ``A`` of a vector unknown the form is assembled into a d x d block
         (BAIJ) matrix of the form's own pattern (:data:`BLOCKED_ASSEMBLY`) and added to
@@ -60,23 +61,29 @@ class Matrices:
         tetrahedron's 12 x 12 element matrix as 16 blocks instead of 144 entries, each
         found by a search in its row, and the copy walks each row once. ``A``'s entries
         are the same numbers, bit for bit, as a direct assembly (each a sum in the same
-        cell order, then added to a zero) and its pattern (contact pairs included) is left
-        as it is, so a factorisation keeps its symbolic analysis. A BAIJ ``A``, a scalar
-        unknown (the mixed (u, p)) or ``BLOCKED_ASSEMBLY = False`` assemble directly.
+        cell order, then added to a zero; under MPI the contributions of other ranks' cells
+        arrive in another order, so a few entries differ in the last bit) and its pattern
+        (contact pairs included) is left as it is, so a factorisation keeps its symbolic
+        analysis. A BAIJ ``A``, a scalar unknown (the mixed (u, p)) or
+        ``BLOCKED_ASSEMBLY = False`` assemble directly.
         """
         bs = self.V.dofmap.index_map_bs
         if not BLOCKED_ASSEMBLY or self.mixed or bs == 1 or \
                 A.getType() not in ("seqaij", "mpiaij"):
             fem_petsc.assemble_matrix(A, form, self.bcs)
             return
+        if not A.assembled:
+            # a matrix never assembled holds its pattern as preallocation only (DOLFINx
+            # 0.9), which an assembly before any insertion squeezes out: fill it once
+            fem_petsc.assemble_matrix(A, form, self.bcs)
+            A.assemble()
+            A.zeroEntries()
         B = self._blocked.get(id(form))
         if B is None:
             B = self._blocked[id(form)] = fem_petsc.create_matrix(form, "baij")
         B.zeroEntries()
         fem_petsc.assemble_matrix(B, form, self.bcs)
         B.assemble()
-        if not A.assembled:  # a new matrix: MatAXPY adds to an assembled one
-            A.assemble()
         A.axpy(1.0, B, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         self.blocked_assemblies += 1
 
