@@ -1828,6 +1828,20 @@ MUTATIONS: list[Mutation] = [
               "test_blocked_hessian_equals_the_direct_one_and_keeps_the_pattern",),
              "the block matrix added as of a different pattern: PETSc rebuilds the Hessian's "
              "pattern and MUMPS redoes its symbolic analysis at every Newton iteration"),
+    # -- the landing's line search: halving where bt cuts to a tenth ----------------------
+    Mutation("landing-halving-off", "fem_anim/solver/minimiser.py",
+             "HALVE_CLIPPED = True",
+             "HALVE_CLIPPED = False",
+             ("tests/test_landing_line_search.py::"
+              "test_the_landing_halves_instead_of_cutting_to_a_tenth",),
+             "PETSc's bt alone: a landing covers a tenth of the remaining fall per Newton "
+             "iteration (13 iterations for the pile's first step)"),
+    Mutation("landing-halving-tenth", "fem_anim/solver/minimiser.py",
+             "HALVINGS = (0.5, 0.25, 0.125)",
+             "HALVINGS = (0.1,)",
+             ("tests/test_landing_line_search.py::"
+              "test_the_landing_halves_instead_of_cutting_to_a_tenth",),
+             "the pre-backtrack tries bt's own tenth: the landing's iterations come back"),
 ]
 
 
