@@ -345,6 +345,15 @@ class IPCContact:
             A: The Hessian matrix; it must accept new nonzeros.
             scale: The factor applied to the barrier's Hessian (the integrator weight w).
         """
+        self.insert_hessian(A, self.hessian_triplets(scale))
+
+    def hessian_triplets(self, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``scale`` kappa Hess B(x)^+ (+ Hess D) as triplets of this rank's rows (collective).
+
+        Returns:
+            Global rows (sorted), columns (sorted within a row) and values; a row and
+            column may repeat (pairs sharing dofs: their values are added).
+        """
         x = self._update()
         start = time.perf_counter()
         H = self.kappa * self.potential.hessian(self.collisions, self.halo.mesh, x,
@@ -368,6 +377,15 @@ class IPCContact:
         if rows.size:
             order = np.lexsort((cols, rows))
             rows, cols, vals = rows[order], cols[order], vals[order]
+        self.timers["barrier_s"] += time.perf_counter() - start
+        return rows, cols, vals
+
+    def insert_hessian(self, A: PETSc.Mat, triplets) -> None:
+        """Add :meth:`hessian_triplets`' triplets to ``A`` (this rank's rows; before
+        ``A.assemble()``)."""
+        start = time.perf_counter()
+        rows, cols, vals = triplets
+        if rows.size:
             unique, first = np.unique(rows, return_index=True)
             indptr = np.r_[first, rows.size].astype(PETSc.IntType)
             A.setValuesIJV(indptr, cols.astype(PETSc.IntType), vals,

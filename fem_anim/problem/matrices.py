@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import numpy as np
 from dolfinx.fem import petsc as fem_petsc
+from mpi4py import MPI
 from petsc4py import PETSc
 
-__all__ = ["BLOCKED_ASSEMBLY", "Matrices", "orthonormalize"]
+__all__ = ["BLOCKED_ASSEMBLY", "GROW_AT_ONCE", "Matrices", "orthonormalize"]
 
 #: Assemble an AIJ Hessian through a d x d block matrix (:meth:`Matrices.assemble_form_matrix`).
 BLOCKED_ASSEMBLY = True
+#: Widen the Hessian's pattern for new contact entries at once (:meth:`Matrices.grow_pattern`).
+GROW_AT_ONCE = True
 
 
 def orthonormalize(vectors: list[PETSc.Vec]) -> None:
@@ -86,6 +89,51 @@ class Matrices:
         B.assemble()
         A.axpy(1.0, B, PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         self.blocked_assemblies += 1
+
+    def grow_pattern(self, A: PETSc.Mat, rows: np.ndarray, cols: np.ndarray) -> bool:
+        """Widen ``A``'s nonzero pattern to hold the entries (rows, cols) (this rank's rows,
+        global columns) in one go, before they are added (collective).
+
+        Contact pairs couple dofs the elastic pattern does not, and new pairs keep coming
+        within a step. Added one by one, each new entry of a full row makes PETSc
+        reallocate the whole matrix (``MatSeqXAIJReallocateAIJ``: a copy of every nonzero);
+        here the union of ``A``'s pattern and the new entries is set at once
+        (``MatXAIJSetPreallocationCSR``, zero values: call it before assembling ``A``). The
+        pattern is the same set of nonzeros either way, so the factorisation is the same
+        and its symbolic analysis is redone at the same Newton iterations as before.
+        Does nothing (False) when :data:`GROW_AT_ONCE` is False, ``A`` was never
+        assembled, or no rank has a new entry.
+
+        Returns:
+            Whether the pattern was widened.
+        """
+        if not GROW_AT_ONCE or not A.assembled:
+            return False
+        n = A.getSize()[1]
+        start, end = A.getOwnershipRange()
+        state = (A.handle, A.getInfo()["nz_allocated"])
+        if self._pattern is None or self._pattern[0] != state:  # read A's pattern
+            indptr, indices, _ = A.getValuesCSR()
+            local = np.repeat(np.arange(start, end, dtype=np.int64), np.diff(indptr))
+            self._pattern = (state, local * n + indices, indptr.astype(PETSc.IntType),
+                             indices.astype(PETSc.IntType))
+        _, keys, indptr, columns = self._pattern
+        wanted = np.unique(rows.astype(np.int64) * n + cols)
+        at = np.searchsorted(keys, wanted)
+        missing = wanted[(at == keys.size) | (keys[np.minimum(at, keys.size - 1)] != wanted)] \
+            if keys.size else wanted
+        if not self.comm.allreduce(missing.size > 0, op=MPI.LOR):
+            return False
+        at = np.searchsorted(keys, missing)  # each row's columns stay sorted
+        keys = np.insert(keys, at, missing)
+        columns = np.insert(columns, at, (missing % n).astype(PETSc.IntType))
+        added = np.bincount(missing // n - start, minlength=end - start)
+        indptr = indptr + np.r_[0, np.cumsum(added)].astype(PETSc.IntType)
+        A.setPreallocationCSR((indptr, columns))
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        self._pattern = ((A.handle, A.getInfo()["nz_allocated"]), keys, indptr, columns)
+        self.pattern_growths += 1
+        return True
 
     def configure_preconditioner(self, pc: PETSc.PC) -> None:
         """Give a ``fieldsplit`` PC the fields of a mixed problem (``schur`` preset)."""

@@ -87,6 +87,9 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         self.ufl_elastic = terms.elastic_u
         self.assembly_s = 0.0  # wall time spent assembling (objective, residual, Jacobian)
         self._blocked = {}  # form id -> its block (BAIJ) matrix (assemble_form_matrix)
+        self._pattern = None  # ((matrix, nonzeros), sorted entry keys) (grow_pattern)
+        #: Hessians whose pattern grow_pattern widened (contact pairs' new entries)
+        self.pattern_growths = 0
         #: Hessians assembled through a block matrix (Matrices.assemble_form_matrix)
         self.blocked_assemblies = 0
         start = time.perf_counter()
@@ -400,11 +403,14 @@ class EnergyProblem(Discretisation, EnergyTerms, TangentFilter, Pins, Matrices,
         self.set_state(x)
         if self.hessian_filter is not None:
             self.tangent_data.update()
+        if self.ipc is not None:  # the pairs' entries, and A's pattern grown to hold them
+            barrier = self.ipc.hessian_triplets(float(self.weight.value))
+            self.grow_pattern(A, barrier[0], barrier[1])
         A.zeroEntries()
         self.assemble_form_matrix(A, self._active_jacobian)
         if self.ipc is not None:
             A.assemble(PETSc.Mat.AssemblyType.FLUSH)
-            self.ipc.add_hessian(A, float(self.weight.value))
+            self.ipc.insert_hessian(A, barrier)
         A.assemble()
         if self.constant_terms is not None:
             # contact pairs and a shell's hinges (edge-neighbour couplings) add nonzeros

@@ -1842,6 +1842,19 @@ MUTATIONS: list[Mutation] = [
              ("tests/test_landing_line_search.py::"
               "test_the_landing_halves_instead_of_cutting_to_a_tenth",),
              "the pre-backtrack tries bt's own tenth: the landing's iterations come back"),
+    # -- the Hessian's pattern widened at once for new contact entries -------------------
+    Mutation("grow-pattern-off", "fem_anim/problem/matrices.py",
+             "GROW_AT_ONCE = True",
+             "GROW_AT_ONCE = False",
+             ("tests/test_hessian_pattern.py::test_contact_entries_widen_the_pattern_at_once",),
+             "new contact entries added one by one: each new entry of a full row copies the "
+             "whole matrix"),
+    Mutation("grow-pattern-wrong-columns", "fem_anim/problem/matrices.py",
+             "columns = np.insert(columns, at, (missing % n).astype(PETSc.IntType))",
+             "columns = np.insert(columns, at, (missing // n).astype(PETSc.IntType))",
+             ("tests/test_hessian_pattern.py::test_contact_entries_widen_the_pattern_at_once",),
+             "the widened pattern holds the rows' indices as columns: the pairs' entries are "
+             "still missing and reallocate at insertion"),
 ]
 
 
