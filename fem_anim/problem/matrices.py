@@ -101,16 +101,21 @@ class Matrices:
         (``MatXAIJSetPreallocationCSR``, zero values: call it before assembling ``A``). The
         pattern is the same set of nonzeros either way, so the factorisation is the same
         and its symbolic analysis is redone at the same Newton iterations as before.
-        Does nothing (False) when :data:`GROW_AT_ONCE` is False, ``A`` was never
-        assembled, or no rank has a new entry.
+        Serial only: an MPI matrix re-preallocated rebuilds its diagonal and off-diagonal
+        blocks, whose restarted nonzero states PETSc sums into the matrix's, so the new
+        pattern's state can equal an old one and the factorisation reuse a stale symbolic
+        analysis (seen as heap corruption in MUMPS under PETSc 3.22 with 2 ranks); under
+        MPI the entries are added one by one, as before. Does nothing (False) there, when
+        :data:`GROW_AT_ONCE` is False, when ``A`` was never assembled, or without a new
+        entry.
 
         Returns:
             Whether the pattern was widened.
         """
-        if not GROW_AT_ONCE or not A.assembled:
+        if not GROW_AT_ONCE or not A.assembled or self.comm.size > 1:
             return False
         n = A.getSize()[1]
-        start, end = A.getOwnershipRange()
+        start, end = A.getOwnershipRange()  # (0, n): one rank
         state = (A.handle, A.getInfo()["nz_allocated"])
         if self._pattern is None or self._pattern[0] != state:  # read A's pattern
             indptr, indices, _ = A.getValuesCSR()
