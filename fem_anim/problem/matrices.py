@@ -101,11 +101,11 @@ class Matrices:
         (``MatXAIJSetPreallocationCSR``, zero values: call it before assembling ``A``). The
         pattern is the same set of nonzeros either way, so the factorisation is the same
         and its symbolic analysis is redone at the same Newton iterations as before.
-        Serial only: an MPI matrix re-preallocated rebuilds its diagonal and off-diagonal
-        blocks, whose restarted nonzero states PETSc sums into the matrix's, so the new
-        pattern's state can equal an old one and the factorisation reuse a stale symbolic
-        analysis (seen as heap corruption in MUMPS under PETSc 3.22 with 2 ranks); under
-        MPI the entries are added one by one, as before. Does nothing (False) there, when
+        Serial only: on 2 ranks under PETSc 3.22 a run aborted with heap corruption in
+        MUMPS's numeric factorisation (likely: an MPI matrix re-preallocated rebuilds its
+        diagonal and off-diagonal blocks, whose restarted nonzero states PETSc sums into the
+        matrix's, so the new pattern's state can equal an old one and a stale symbolic
+        analysis be reused); under MPI the entries are added one by one, as before. Does nothing (False) there, when
         :data:`GROW_AT_ONCE` is False, when ``A`` was never assembled, or without a new
         entry.
 
