@@ -1813,6 +1813,18 @@ MUTATIONS: list[Mutation] = [
               "test_a_compile_waits_for_another_process_compiling_the_same_module",),
              "two processes compiling one module on a cold cache: the second gave up after "
              "FFCx's 10 s (\"JIT compilation timed out\")"),
+    # -- the Python API resumes a stopped run ----------------------------------------------
+    Mutation("api-resume-starts-over", "fem_anim/runs.py",
+             "result = sim.run(outdir, quiet=quiet, resume=resume)",
+             "result = sim.run(outdir, quiet=quiet, resume=False)",
+             ("tests/test_python_api.py::test_a_run_stopped_by_a_signal_resumes_from_python",),
+             "fem_anim.run(..., resume=True) replaces the stopped run by a new one from t = 0"),
+    Mutation("api-stop-keeps-temporary-folder", "fem_anim/runs.py",
+             "            if comm.rank == 0:\n                shutil.rmtree(owned, "
+             "ignore_errors=True)\n            raise\n",
+             "            raise\n",
+             ("tests/test_python_api.py::test_resume_needs_the_stopped_runs_directory",),
+             "a temporary run stopped by a signal leaves its folder (nobody can reach it)"),
 ]
 
 
