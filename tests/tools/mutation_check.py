@@ -1825,6 +1825,13 @@ MUTATIONS: list[Mutation] = [
              "            raise\n",
              ("tests/test_python_api.py::test_resume_needs_the_stopped_runs_directory",),
              "a temporary run stopped by a signal leaves its folder (nobody can reach it)"),
+    Mutation("joint-resume-ignores-merged-frames", "fem_anim/output/trajectory.py",
+             "                    if not self.frame_file(k).is_file() and k < merged.size \\\n",
+             "                    if False and k < merged.size \\\n",
+             ("tests/test_joint_kill_resume.py::test_kill_a_joint_run_inside_writes_then_resume"
+              "[-1-after]",),
+             "a joint run killed after its three trajectories were merged: the resume finds no "
+             "frame files and refuses the run"),
 ]
 
 
