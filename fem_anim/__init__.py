@@ -27,6 +27,7 @@ _all, __getattr__, _dir = lazy_exports(__name__, {
     "SceneError": "errors",
     "FemAnimError": "errors",
     "ConvergenceError": "errors",
+    "Interrupted": "errors",
 })
 __all__ = ["__version__", *_all]
 

@@ -168,17 +168,9 @@ def _run(args, cli_options: dict[str, str], argv: list[str]) -> int:
 
 def _say_what_is_kept(err, out, argv: list[str]):
     """Raise ``err`` again, saying what the stopped run keeps and how to continue it."""
-    if not (Path(out) / ".partial" / "checkpoint.npz").is_file():
-        kept = f"the frames so far are kept in {out}/.partial (no checkpoint yet: " \
-               "nothing to resume; a new run replaces them)"
-    else:
-        other = " (e.g. with other solver options)" \
-            if isinstance(err, ConvergenceError) else ""
-        kept = f"the frames so far and the last checkpoint are kept in {out}/.partial: " \
-               f"continue with `{resume_command(argv, out)}`{other}"
-    if isinstance(err, Interrupted):
-        raise Interrupted(f"{err}; {kept}", err.signum) from None
-    raise ConvergenceError(f"{err}; {kept}") from None
+    from fem_anim.output.rundir import stopped_run_error
+
+    raise stopped_run_error(err, Path(out), resume_command(argv, str(out))) from None
 
 
 def _run_joint(args, scene, out: Path, cli_options: dict[str, str], argv: list[str]) -> int:

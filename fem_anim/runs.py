@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from fem_anim.errors import FemAnimError
-from fem_anim.output.rundir import STAGING
+from fem_anim.errors import ConvergenceError, FemAnimError, Interrupted
+from fem_anim.output.rundir import STAGING, stopped_run_error
 
 __all__ = ["Run", "run", "open_run", "RUN_FILES", "ENERGY_COLUMNS"]
 
@@ -192,7 +192,8 @@ not exist
     raise FemAnimError(f"{path} is not a finished fem-anim run: {why}")
 
 
-def run(scene, outdir: str | Path | None = None, quiet: bool = True) -> Run:
+def run(scene, outdir: str | Path | None = None, quiet: bool = True,
+        resume: bool = False) -> Run:
     """Simulate a scene, write its run directory and return the finished :class:`Run`.
 
     Collective under MPI (every rank calls it with the same scene). The FFCx JIT's build
@@ -201,12 +202,21 @@ def run(scene, outdir: str | Path | None = None, quiet: bool = True) -> Run:
     (:mod:`fem_anim.simulation.joint_run`); the :class:`Run` then reads its
     ``trajectory.h5``, the seen surface of both meshes.
 
+    A run into ``outdir`` that stops with :class:`ConvergenceError` or :class:`Interrupted`
+    keeps its frames and last checkpoint in ``outdir/.partial``, and the message says so and
+    how to continue (``resume=True``); a temporary run directory (``outdir=None``) is
+    deleted with what it held.
+
     Args:
         scene: A :class:`~fem_anim.scene.loading.Scene`.
         outdir: The run directory (created; an earlier run there is replaced). ``None``: a
             new temporary directory, deleted by :meth:`Run.close`, at the end of a
             ``with`` block, or when the :class:`Run` is garbage-collected.
         quiet: No progress bar.
+        resume: Continue the run stopped in ``outdir`` from its last checkpoint, as
+            ``fem-anim run SCENE --resume OUTDIR`` does (docs/resume.md): only
+            ``[solver]``, ``[output]`` and ``[render]`` of ``scene`` may differ from the
+            stopped run's.
 
     Returns:
         The finished run.
@@ -214,8 +224,10 @@ def run(scene, outdir: str | Path | None = None, quiet: bool = True) -> Run:
     Raises:
         TypeError: if ``scene`` is not a Scene.
         ConvergenceError: when a step does not converge even at ``time.min_dt``.
-        FemAnimError: for an output directory that cannot be written, and every other
-            failure the command line reports.
+        Interrupted: after SIGINT, SIGTERM or SIGHUP, at the end of a frame.
+        FemAnimError: for an output directory that cannot be written, ``resume`` without
+            ``outdir`` or without a checkpoint there, and every other failure the command
+            line reports.
 
     Examples:
         >>> import fem_anim
@@ -244,42 +256,63 @@ def run(scene, outdir: str | Path | None = None, quiet: bool = True) -> Run:
     """
     from mpi4py import MPI
 
-    from fem_anim.console import quiet_jit
-    from fem_anim.output.provenance import software_versions
-    from fem_anim.output.rundir import read_manifest, write_manifest
     from fem_anim.scene.loading import Scene
-    from fem_anim.simulation.energy_report import energy_report, initial_energies, write_summary
-    from fem_anim.simulation.loop import Simulation
 
     if not isinstance(scene, Scene):
         raise TypeError(f"fem_anim.run takes a fem_anim.Scene (Scene.load, from_toml, "
                         f"from_dict), got {type(scene).__name__}")
     comm = MPI.COMM_WORLD
+    if resume and outdir is None:
+        raise FemAnimError("fem_anim.run(..., resume=True) continues the run stopped in "
+                           "outdir: give outdir")
     owned = None
     if outdir is None:
         owned = Path(tempfile.mkdtemp(prefix=f"fem_anim-{scene.name}-")) \
             if comm.rank == 0 else None
         owned = comm.bcast(owned, root=0)
         outdir = owned / "run"
+    try:
+        _run_into(scene, Path(outdir), comm, quiet, resume)
+    except (ConvergenceError, Interrupted) as err:
+        if owned is not None:
+            comm.barrier()
+            if comm.rank == 0:
+                shutil.rmtree(owned, ignore_errors=True)
+            raise
+        continue_with = f"fem_anim.run(scene, {str(outdir)!r}, resume=True)"
+        raise stopped_run_error(err, Path(outdir), continue_with,
+                                " (e.g. with other [solver] settings)") from None
+    except BaseException:
+        if owned is not None and comm.rank == 0:
+            shutil.rmtree(owned, ignore_errors=True)
+        raise
+    comm.barrier()
+    return Run(Path(outdir), owned if comm.rank == 0 else None)
+
+
+def _run_into(scene, outdir: Path, comm, quiet: bool, resume: bool) -> None:
+    """Step ``scene`` and write its run directory ``outdir`` with its summary (collective)."""
+    from fem_anim.console import quiet_jit
+    from fem_anim.output.provenance import software_versions
+    from fem_anim.output.rundir import read_manifest, write_manifest
     from fem_anim.scene.joint_rules import shell_body
+    from fem_anim.simulation.energy_report import energy_report, initial_energies, write_summary
+    from fem_anim.simulation.loop import Simulation
 
     if shell_body(scene.data) is not None:  # a shell beside solids: two meshes, one step
         from fem_anim.simulation.joint_run import run_joint
 
         with quiet_jit():
-            run_joint(scene, Path(outdir), comm, quiet=quiet,
-                      provenance={"versions": software_versions(comm)})
-        comm.barrier()
-        return Run(Path(outdir), owned if comm.rank == 0 else None)
+            run_joint(scene, outdir, comm, quiet=quiet,
+                      provenance={"versions": software_versions(comm)}, resume=resume)
+        return
     with quiet_jit():
         sim = Simulation(scene, comm)
         initial = initial_energies(sim)
-        result = sim.run(Path(outdir), quiet=quiet)
+        result = sim.run(outdir, quiet=quiet, resume=resume)
     report = energy_report(result.rows, initial, scene)
     if comm.rank == 0:
         write_summary(result.output_dir / "summary.json", scene, result.rows, report,
                       {"versions": software_versions(comm), "petsc_options": sim.options,
                        "wall": sim.clock.as_dict()})
         write_manifest(result.output_dir, read_manifest(result.output_dir) | {"summary.json"})
-    comm.barrier()
-    return Run(Path(outdir), owned if comm.rank == 0 else None)

@@ -157,32 +157,20 @@ def test_energy_line_separates_handle_work_and_is_calm_for_dissipation():
 
 
 # -- 2. Newton that settles: IPC's step test, and each step's equations still hold ------------
-def _frame_dofs(sim, frame: np.ndarray) -> np.ndarray:
-    """A written frame (input vertex order) as local dof values of V (serial)."""
-    g = sim.gather
-    u = np.zeros(sim.problem.u.x.array.size)
-    u.reshape(-1, g.bs)[g.node_to_dof] = frame[g.input_index]
-    return u
-
-
 @pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="re-reads the files on one rank")
 @pytest.mark.parametrize("scene", ["stack", "pile"])
 def test_each_step_satisfies_its_equations_from_the_written_outputs(tmp_path, scene):
     """Re-assemble implicit Euler's residual M (x - y) + h^2 (grad E + kappa grad B + grad D)
-    of every written step from the trajectory and stats.csv's kappa alone: at most 1e-6 of
-    its largest force term (inertia and the momenta h M v_{n+1}, h M v_n it is the
-    difference of, gravity, elastic and obstacle, IPC barrier and friction), with IPC's
-    step test stopping Newton. On the two cubes of ``STACK`` (friction) and on the bench's
-    4-box pile, 6 steps (where steps 4-6 ended at a false round-off floor with ||r|| at 1 to
-    10 % of the largest force term until the round-off test asked that the direction
-    promised no more than g's resolution: docs/contact.md, "The 4-box pile against today
-    and against the baseline")."""
-    from dolfinx.fem import petsc as fem_petsc
-    from petsc4py import PETSc
-
+    of every written step from the trajectory and stats.csv's kappa alone
+    (:func:`fem_anim.bench.step_residuals.step_residuals`): at most 1e-6 of its largest force
+    term (inertia and the momenta h M v_{n+1}, h M v_n it is the difference of, gravity,
+    elastic and obstacle, IPC barrier and friction), with IPC's step test stopping Newton. On
+    the two cubes of ``STACK`` (friction) and on the bench's 4-box pile, 6 steps (where steps
+    4-6 ended at a false round-off floor with ||r|| at 1 to 10 % of the largest force term
+    until the round-off test asked that the direction promised no more than g's resolution:
+    docs/contact.md, "The 4-box pile against today and against the baseline")."""
     from fem_anim.bench.contact_cost import pile_scene
-    from fem_anim.runs import open_run
-    from fem_anim.simulation.loop import Simulation
+    from fem_anim.bench.step_residuals import step_residuals
 
     if scene == "stack":
         text = STACK.format(steps=10)
@@ -190,50 +178,23 @@ def test_each_step_satisfies_its_equations_from_the_written_outputs(tmp_path, sc
         text = pile_scene(0.02).replace("[time]\n", "[time]\nsteps = 6\n", 1)
     rows, _, out = run(tmp_path, text, "output.render=false")
     assert all(int(r["retries"]) == 0 and r["snes_reason"] == "5" for r in rows)
-    written = open_run(out)
-    sim = Simulation(Scene.from_toml(text))
-    p = sim.problem
-    M = fem_petsc.assemble_matrix(p.mass_form)
-    M.assemble()
-    vec = lambda a: PETSc.Vec().createWithArray(a.copy())  # noqa: E731
-    frames = [_frame_dofs(sim, written.displacement(k)) for k in range(len(written.times))]
-    assert len(frames) == len(rows) + 1
-    worst = 0.0
-    for n, row in enumerate(rows):
-        h = float(row["dt"])
-        u_n, x = frames[n], frames[n + 1]
-        v_n = (frames[n] - frames[n - 1]) / h if n else sim.initial_state().v.copy()
-        y = u_n + h * v_n
-        w = h * h
-        p.stage(u_n, y, w, float(row["time"]), h)
-        p.u.x.array[:] = u_n
-        p.ipc.restage(float(row["barrier_stiffness"]), h)
-        assert float(row["dhat"]) == p.ipc.dhat
-        p.u.x.array[:] = x
-        p.update_quadrature_data()
-        inertia = vec(x - y)
-        M.mult(vec(x - y), inertia)
-        gravity = p.constant_terms.gradient.copy()
-        gravity.scale(w)
-        potential = fem_petsc.assemble_vector(p.potential_gradient_form)
-        potential.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        potential.scale(w)
-        elastic = potential.copy()
-        elastic.axpy(-1.0, gravity)  # elastic and the ground's barrier and friction
-        barrier = vec(np.zeros_like(x))
-        p.ipc.add_gradient(barrier, w)
-        terms = [inertia, gravity, elastic, barrier]
-        r = sum(t.array for t in terms)
-        momenta = [M.createVecLeft() for _ in range(2)]  # h M v_{n+1}, h M v_n
-        M.mult(vec(x - u_n), momenta[0])
-        M.mult(vec(y - u_n), momenta[1])
-        largest = max(t.norm() for t in terms + momenta)
-        worst = max(worst, np.linalg.norm(r) / largest)
-        assert np.linalg.norm(r) <= 1e-6 * largest, (n + 1, np.linalg.norm(r) / largest)
-        for t in terms + momenta + [potential]:
-            t.destroy()
-    assert worst > 0.0
-    M.destroy()
+    residuals = step_residuals(Scene.from_toml(text), out)
+    assert len(residuals) == len(rows)
+    assert all(s.dhat_matches for s in residuals)
+    assert all(s.ratio <= 1e-6 for s in residuals), [(s.step, s.ratio) for s in residuals]
+    assert max(s.ratio for s in residuals) > 0.0
+
+
+def test_step_residuals_command_names_a_missing_run_in_one_line(tmp_path, capsys):
+    """``python -m fem_anim.bench.step_residuals SCENE RUN_DIR`` on a folder without a run:
+    one line naming the missing file, exit code 2."""
+    from fem_anim.bench.step_residuals import main
+
+    scene = tmp_path / "pile.toml"
+    scene.write_text(STACK.format(steps=2))
+    assert main([str(scene), str(tmp_path / "no_run")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("fem-anim: error: ") and "stats.csv" in err and "\n" not in err
 
 
 def test_bodies_at_rest_take_at_most_two_newton_iterations(tmp_path):

@@ -56,6 +56,8 @@ def replace(src, dst, *args, **kwargs):
         calls[0] += 1
         with open(count_file, "w") as f:
             f.write(str(calls[0]))
+        with open(count_file + ".names", "a") as f:  # the staged files, in order
+            f.write(str(dst).split("/.partial/")[1] + "\n")
         if calls[0] == at:
             if mode == "torn":  # killed inside the write: half the bytes, never renamed
                 os.truncate(src, os.path.getsize(src) // 2)

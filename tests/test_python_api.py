@@ -65,7 +65,7 @@ def test_import_fem_anim_loads_no_dolfinx():
 
 def test_public_names():
     assert {"Scene", "run", "open_run", "Run", "Simulation", "SceneError", "FemAnimError",
-            "__version__"} <= set(fem_anim.__all__)
+            "ConvergenceError", "Interrupted", "__version__"} <= set(fem_anim.__all__)
     assert callable(fem_anim.run) and fem_anim.open_run is not None
 
 
@@ -166,6 +166,93 @@ def test_a_temporary_run_is_deleted_when_closed(tmp_path, monkeypatch):
         assert (outdir / "stats.csv").is_file()
     assert not outdir.exists() and not outdir.parent.exists()
     assert list(tmp_path.iterdir()) == []  # nothing written into the working directory
+
+
+def _signal_at_frame(monkeypatch, frame: int) -> None:
+    """SIGINT to this process while frame ``frame`` is written (the first signal: the run
+    stops at that frame's end with a checkpoint there)."""
+    import signal
+
+    from fem_anim.simulation.loop import Simulation
+
+    fields, calls = Simulation.frame_fields, []
+
+    def frame_fields(self, state):
+        calls.append(state.time)
+        if len(calls) == frame + 1:
+            os.kill(os.getpid(), signal.SIGINT)
+        return fields(self, state)
+
+    monkeypatch.setattr(Simulation, "frame_fields", frame_fields)
+
+
+def test_a_run_stopped_by_a_signal_resumes_from_python(tmp_path, monkeypatch):
+    """``fem_anim.run(scene, outdir, resume=True)`` continues a run a signal stopped, as
+    ``fem-anim run --resume`` does, and ends where the run nobody stopped ends; the stop's
+    message says how (docs/python_api.md)."""
+    scene = fem_anim.Scene.from_dict(TINY, ["time.steps=8", "output.checkpoint_every=1"])
+    with fem_anim.run(scene) as whole:
+        expected, stats = whole.displacement(-1), whole.stats
+    out = tmp_path / "out"
+    with monkeypatch.context() as m:
+        _signal_at_frame(m, 3)
+        with pytest.raises(fem_anim.Interrupted) as stop:
+            fem_anim.run(scene, out)
+    message = str(stop.value)
+    assert f"fem_anim.run(scene, {str(out)!r}, resume=True)" in message, message
+    assert "\n" not in message and not (out / "stats.csv").exists()
+    from fem_anim.simulation.loop import Simulation
+
+    steps, step = [], Simulation.timed_step
+    monkeypatch.setattr(Simulation, "timed_step",
+                        lambda self, *a: steps.append(1) or step(self, *a))
+    resumed = fem_anim.run(scene, out, resume=True)
+    assert len(steps) == 8 - 3  # from the checkpoint at frame 3, not from the start
+    assert len(resumed.times) == 9
+    assert np.array_equal(resumed.displacement(-1), expected)
+    assert [r["newton_its"] for r in resumed.stats] == [r["newton_its"] for r in stats]
+
+
+@pytest.mark.mpi
+def test_a_run_stopped_under_mpirun_resumes_from_python(tmp_path):
+    """The same under ``mpirun -n 2`` (tests/mpi/mpi_api_resume.py): every rank stops at
+    frame 3, the resume takes the 5 steps left and ends where the whole run ends."""
+    from conftest import ROOT, clean_environment, mpirun_command
+
+    prefix = mpirun_command(2)
+    if prefix is None:
+        pytest.skip("mpirun not available")
+    out = tmp_path / "out"
+    r = subprocess.run([*prefix, sys.executable, str(ROOT / "tests" / "mpi" /
+                                                     "mpi_api_resume.py"), str(out)],
+                       capture_output=True, text=True, timeout=600, env=clean_environment(),
+                       cwd=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    lines = dict(line.split(" ", 1) for line in r.stdout.splitlines() if " " in line)
+    assert "resume=True" in lines["STOP"] and "frame 3 of 8" in lines["STOP"], r.stdout
+    taken, frames, gap = lines["RESUMED"].split()
+    assert (int(taken), int(frames)) == (5, 9) and float(gap) <= 1e-12, r.stdout
+
+
+def test_resume_needs_the_stopped_runs_directory(tmp_path, monkeypatch):
+    """``resume=True`` without ``outdir`` or with no checkpoint there is refused in one line;
+    a temporary run that a signal stops leaves no temporary folder behind."""
+    import tempfile
+
+    from fem_anim.errors import Interrupted
+
+    scene = fem_anim.Scene.from_dict(TINY, ["time.steps=6", "output.checkpoint_every=1"])
+    with pytest.raises(FemAnimError, match="give outdir"):
+        fem_anim.run(scene, resume=True)
+    with pytest.raises(FemAnimError, match="resume"):
+        fem_anim.run(scene, tmp_path / "never_ran", resume=True)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    _signal_at_frame(monkeypatch, 2)
+    with pytest.raises(Interrupted) as stop:
+        fem_anim.run(scene)
+    assert "resume=True" not in str(stop.value)
+    assert list((tmp_path / "tmp").iterdir()) == []
 
 
 def test_run_takes_a_scene():

@@ -13,7 +13,8 @@ time by PETSc events as the mesh grows (:mod:`~fem_anim.bench.worker`,
 :mod:`~fem_anim.bench.contact_set` runs the classic contact scenes beside the plain
 ipctk + scipy IPC step of :mod:`~fem_anim.bench.ipc_baseline`;
 :mod:`~fem_anim.bench.mixed_verification` verifies the mixed formulation quasi-statically;
-:mod:`~fem_anim.bench.cloth_cost` splits a draped sheet's step beside a solid's.
+:mod:`~fem_anim.bench.cloth_cost` splits a draped sheet's step beside a solid's;
+:mod:`~fem_anim.bench.step_residuals` re-derives each step's residual from a run's files.
 Nothing is exported here: each bench is imported by its own module.
 """
 

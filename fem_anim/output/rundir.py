@@ -28,11 +28,11 @@ import json
 import os
 from pathlib import Path
 
-from fem_anim.errors import FemAnimError, describe_os_error
+from fem_anim.errors import ConvergenceError, FemAnimError, Interrupted, describe_os_error
 
 __all__ = ["MARKER", "LOCK", "STAGING", "claim", "check_not_in_use", "install",
            "read_manifest", "write_manifest", "write_atomically", "foreign_files",
-           "RENDER_PRODUCTS"]
+           "RENDER_PRODUCTS", "stopped_run_error"]
 
 MARKER = ".fem_anim-run"
 LOCK = ".fem_anim-lock"
@@ -221,3 +221,33 @@ def install(staging: Path, path: Path, replaces: set[str] | None = None) -> None
         item.rmdir()
     staging.rmdir()
     write_manifest(path, (owned - (replaces or set())) | new)
+
+
+def stopped_run_error(err: ConvergenceError | Interrupted, path: Path, continue_with: str,
+                      other_options: str = " (e.g. with other solver options)"
+                      ) -> ConvergenceError | Interrupted:
+    """``err`` again, saying what the run stopped in ``path`` keeps and how to continue it.
+
+    A stopped run leaves its frames so far in ``path/.partial`` (:data:`STAGING`) and, once
+    one was written, the checkpoint ``--resume`` continues from (docs/resume.md).
+
+    Args:
+        err: Why the run stopped (a step that did not converge, or a signal).
+        path: The run directory.
+        continue_with: How the user continues it, e.g. ``fem-anim run ... --resume OUT``.
+        other_options: Said after ``continue_with`` for a step that did not converge.
+
+    Returns:
+        An error of ``err``'s type (an :class:`Interrupted` keeps its signal number) whose
+        message ends with what is kept, and ``continue_with`` when there is a checkpoint.
+    """
+    if not (Path(path) / STAGING / "checkpoint.npz").is_file():
+        kept = f"the frames so far are kept in {path}/{STAGING} (no checkpoint yet: " \
+               "nothing to resume; a new run replaces them)"
+    else:
+        other = other_options if isinstance(err, ConvergenceError) else ""
+        kept = f"the frames so far and the last checkpoint are kept in {path}/{STAGING}: " \
+               f"continue with `{continue_with}`{other}"
+    if isinstance(err, Interrupted):
+        return Interrupted(f"{err}; {kept}", err.signum)
+    return ConvergenceError(f"{err}; {kept}")

@@ -1813,6 +1813,25 @@ MUTATIONS: list[Mutation] = [
               "test_a_compile_waits_for_another_process_compiling_the_same_module",),
              "two processes compiling one module on a cold cache: the second gave up after "
              "FFCx's 10 s (\"JIT compilation timed out\")"),
+    # -- the Python API resumes a stopped run ----------------------------------------------
+    Mutation("api-resume-starts-over", "fem_anim/runs.py",
+             "result = sim.run(outdir, quiet=quiet, resume=resume)",
+             "result = sim.run(outdir, quiet=quiet, resume=False)",
+             ("tests/test_python_api.py::test_a_run_stopped_by_a_signal_resumes_from_python",),
+             "fem_anim.run(..., resume=True) replaces the stopped run by a new one from t = 0"),
+    Mutation("api-stop-keeps-temporary-folder", "fem_anim/runs.py",
+             "            if comm.rank == 0:\n                shutil.rmtree(owned, "
+             "ignore_errors=True)\n            raise\n",
+             "            raise\n",
+             ("tests/test_python_api.py::test_resume_needs_the_stopped_runs_directory",),
+             "a temporary run stopped by a signal leaves its folder (nobody can reach it)"),
+    Mutation("joint-resume-ignores-merged-frames", "fem_anim/output/trajectory.py",
+             "                    if not self.frame_file(k).is_file() and k < merged.size \\\n",
+             "                    if False and k < merged.size \\\n",
+             ("tests/test_joint_kill_resume.py::test_kill_a_joint_run_inside_writes_then_resume"
+              "[-1-after]",),
+             "a joint run killed after its three trajectories were merged: the resume finds no "
+             "frame files and refuses the run"),
     # -- the Hessian form assembled through a d x d block matrix -------------------------
     Mutation("blocked-assembly-off", "fem_anim/problem/matrices.py",
              "BLOCKED_ASSEMBLY = True",
