@@ -41,6 +41,10 @@ measures the factors). An exact direction that the CCD bound or the line search 
 counts as such a failure too, its shortened step kept, until the exact Hessian is tried at
 the test's size itself: Newton's local phase takes its steps whole, and a model that needs
 them cut is not in it yet.
+
+With contact, where PETSc's ``bt`` would cut a direction to a tenth (a barrier making g at
+the full step enormous: a landing), the direction is first halved under Armijo's test
+(:meth:`Minimiser._halve_clipped`, :data:`HALVINGS`).
 """
 
 from __future__ import annotations
