@@ -1,12 +1,18 @@
+#!/bin/bash
+# A measurement of docs/contact.md ("The 4-box pile: the cost of an iteration and the
+# landing"): the contact entries reserved ahead by vertex proximity. Run from the repository
+# root (serial, one BLAS thread):
+#   OPENBLAS_NUM_THREADS=1 bash docs/contact_scenes/reserve_proximity.sh SCENE STEPS K
+exec .venv/bin/python - "$@" <<'PY'
 """A measurement of docs/contact.md ("The 4-box pile: the cost of an iteration and the
 landing"): whenever the Hessian's pattern is widened for new contact pairs
 (``Matrices.grow_pattern``, serial), widen it also by every pair of surface vertices of
-different bodies closer than R = d-hat + PP_R x the longest surface edge (a KD-tree on the
-current positions), so that pairs appearing later find their entries reserved and MUMPS
-redoes its analysis less often. Prints the Newton iterations, the symbolic and numeric
+different bodies closer than R = d-hat + K x the longest surface edge (K the third
+argument; a KD-tree on the current positions), so that pairs appearing later find their
+entries reserved and MUMPS redoes its analysis less often. Prints the Newton iterations, the symbolic and numeric
 factorisations, the stepping CPU and the final nonzeros. Usage (repository root, one BLAS
-thread): PP_R=1 .venv/bin/python docs/contact_scenes/reserve_proximity.py SCENE STEPS
-(PP_R=0: no reservation)."""
+thread): bash docs/contact_scenes/reserve_proximity.sh SCENE STEPS K (K = 0: no
+reservation)."""
 import sys, os, time
 import numpy as np
 from scipy.spatial import cKDTree
@@ -15,7 +21,7 @@ import fem_anim.problem.matrices as m
 import fem_anim.problem.objective as o
 from fem_anim.scene.loading import load_scene
 from fem_anim.simulation.loop import Simulation
-FACTOR = float(os.environ.get("PP_R", "0"))
+FACTOR = float(sys.argv[3])
 sim = Simulation(load_scene(sys.argv[1], ["output.render=false"]))
 p = sim.problem
 ipc = p.ipc
@@ -56,3 +62,4 @@ st = sim.initial_state(); tot = 0; t0 = time.process_time()
 for k in range(int(sys.argv[2])):
     st, stats = sim.step(st, 0.01); tot += stats.newton_its
 print(f"R factor {FACTOR}: its {tot} sym {ev['MatCholFctrSym'].getPerfInfo()['count']} num {ev['MatCholFctrNum'].getPerfInfo()['count']} cpu {time.process_time()-t0:.1f} nnz {sim.minimiser.A.getInfo()['nz_used']:.0f} growths {p.pattern_growths}")
+PY

@@ -1,7 +1,9 @@
-# A measurement script of docs/contact.md ("The 4-box pile: the cost of an iteration and the
-# landing"): CG on each Hessian of one step with the previous Hessian's MUMPS factorisation as
-# preconditioner. Usage (from the repository root, one BLAS thread):
-#   .venv/bin/python docs/contact_scenes/lagged_factor_pcg.py SCENE STEP
+#!/bin/bash
+# A measurement of docs/contact.md ("The 4-box pile: the cost of an iteration and the
+# landing"): CG on each Hessian of one step with the previous Hessian's MUMPS factorisation
+# as preconditioner. Run from the repository root (serial, one BLAS thread):
+#   OPENBLAS_NUM_THREADS=1 bash docs/contact_scenes/lagged_factor_pcg.sh SCENE STEP
+exec .venv/bin/python - "$@" <<'PY'
 """Store every Hessian of step STEP of SCENE (serial), then solve H_k z = b (b random) by CG
 preconditioned with the MUMPS Cholesky factorisation of H_{k-1}, to relative residuals 1e-6
 and 1e-10, and print per Hessian: whether its pattern is H_{k-1}'s, CG's iterations, its KSP
@@ -43,3 +45,4 @@ for k in range(1, len(H)):
         ksp.destroy()
     same = A.getInfo()["nz_used"] == P.getInfo()["nz_used"]
     print(k, "same pattern" if same else "new pattern", "|", " | ".join(res), flush=True)
+PY
