@@ -6,7 +6,9 @@ new pairs appear over several Newton iterations): every Hessian is assembled wit
 single reallocation inside ``MatSetValues`` (PETSc's ``mallocs`` count stays put; added one
 by one, each new entry of a full row copied the whole matrix), the pattern was widened
 more than once, and the run ends at the same state, bit for bit, as with the entries added
-one by one (the same pattern, so the same factorisations), and a Cholesky factorisation
+one by one (the same pattern, so the same factorisations, with MUMPS's symbolic analysis
+redone as often: a re-preallocated matrix whose nonzero state did not change would keep a
+stale analysis), and a Cholesky factorisation
 set up before a widening redoes its symbolic analysis after it (the pattern's state
 changed). Serial only: under ``mpirun -n 2`` (the script at the end) the entries are added
 one by one, as before, and the run ends where the serial one's logic says (to round-off:
@@ -62,9 +64,17 @@ def _run(comm: MPI.Comm, grow: bool):
 
 def check(comm: MPI.Comm) -> list[str]:
     """One line per failure, the same on every rank."""
+    PETSc.Log.begin()  # (the minimiser starts the log too)
+    symbolic = PETSc.Log.Event("MatCholFctrSym")
+    before = symbolic.getPerfInfo()["count"]
     u, reallocations, growths = _run(comm, True)
+    middle = symbolic.getPerfInfo()["count"]
     u_one, reallocations_one, growths_one = _run(comm, False)
+    analyses, analyses_one = middle - before, symbolic.getPerfInfo()["count"] - middle
     failures = []
+    # every widening is seen as a new pattern: MUMPS analyses at the same iterations
+    if not comm.allreduce(analyses == analyses_one > 1, op=MPI.LAND):
+        failures.append(f"{analyses} symbolic analyses (one by one: {analyses_one})")
     serial = comm.size == 1
     if not (growths > 1 if serial else growths == 0) or growths_one != 0:
         failures.append(f"pattern widened {growths} times (one by one: {growths_one})")
