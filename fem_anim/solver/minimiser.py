@@ -187,8 +187,8 @@ class Minimiser:
         if snes.getType() in ("newtonls",):
             snes.setLineSearchPreCheck(self._precheck)
         #: ``bt`` with contact and an objective: halve where bt's fit is clipped
-        #: (:meth:`_halve_clipped`)
-        self._halving = HALVE_CLIPPED and contact and not self.saddle and \
+        #: (:meth:`_halve_clipped`); a caller may turn it off before the first solve
+        self.halving = HALVE_CLIPPED and contact and not self.saddle and \
             snes.getType() == "newtonls" and \
             self.options.get("snes_linesearch_type", "bt") == "bt"
         self._armijo = float(self.options.get("snes_linesearch_alpha", 1e-4))
@@ -448,7 +448,7 @@ class Minimiser:
         scaled = bound_step(self.problem, x, y) < 1.0 or replaced
         if self.problem.filter_inversion:
             scaled = filter_inverting(self.problem, x, y) or scaled
-        if self._halving:
+        if self.halving:
             scaled = self._halve_clipped(x, y) or scaled
         self.hessian.record_model(x, y)
         self.reuse.record_direction(x, y)
