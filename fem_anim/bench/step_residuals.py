@@ -109,11 +109,10 @@ def step_residuals(scene, out: str | Path) -> list[StepResidual]:
         M.mult(vec(x - y), inertia)
         gravity = p.constant_terms.gradient.copy()
         gravity.scale(w)
-        potential = fem_petsc.assemble_vector(p.potential_gradient_form)
-        potential.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        potential.scale(w)
-        elastic = potential.copy()
-        elastic.axpy(-1.0, gravity)  # elastic and the obstacles' barrier and friction
+        # w grad E but gravity: elastic, and the obstacles' barrier and lagged friction
+        # (friction is no potential: the residual's form has it, grad E's does not)
+        elastic = fem_petsc.assemble_vector(p.residual_form)
+        elastic.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         barrier = vec(np.zeros_like(x))
         p.ipc.add_gradient(barrier, w)
         terms = [inertia, gravity, elastic, barrier]
@@ -125,7 +124,7 @@ def step_residuals(scene, out: str | Path) -> list[StepResidual]:
         result.append(StepResidual(int(row["step"]), int(row["newton_its"]),
                                    row["snes_reason"], float(np.linalg.norm(r) / largest),
                                    float(row["dhat"]) == p.ipc.dhat))
-        for t in terms + momenta + [potential]:
+        for t in terms + momenta:
             t.destroy()
     M.destroy()
     return result
