@@ -16,7 +16,11 @@ __all__ = ["JIT_OPTIONS", "compile_forms"]
 #: FFCx/CFFI options of every kernel the problem compiles (forms and expressions). ``-g0``
 #: because CFFI compiles with Python's own CFLAGS, which carry ``-g``: debug information
 #: changes no instruction but slows gcc on large kernels (docs/cloth.md, "Cost").
-JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-g0", "-march=native"]}
+#: ``-fno-schedule-insns2``: gcc 14 (Debian 13), tuning for the machine's CPU
+#: (``-march=native``), can spend nearly all of a kernel's compile in its second instruction
+#: scheduling pass, which an out-of-order CPU hardly needs (docs/cloth.md, "Cost").
+JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-g0", "-march=native",
+                                           "-fno-schedule-insns2"]}
 
 
 def compile_forms(forms: dict[str, ufl.Form]) -> dict:
