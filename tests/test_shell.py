@@ -38,11 +38,29 @@ def surface(points, cells, degree=1):
     return mesh, V, (node[:, None] * 3 + np.arange(3)).ravel()
 
 
+#: JIT options of the forms the shell tests compile themselves (:func:`assemble`,
+#: :func:`clamped_newton`). gcc's ``-O1`` does the same IEEE arithmetic as DOLFINx's default
+#: ``-O2`` (no fast-math) and compiles the large kernels (Kirchhoff-Love's P2 edge terms: MBs
+#: of C) several times faster: most of a cold JIT cache's time in tests/test_shell_kl.py
+#: (docs/getting_started.md, the cold CI timing). The package's own kernels keep
+#: ``JIT_OPTIONS``.
+TEST_JIT = {"cffi_extra_compile_args": ["-O1", "-g0"]}
+
+
+def energy_forms(form, u) -> dict:
+    """``form``, its gradient and its Hessian in ``u``, compiled together into one module
+    (:func:`fem_anim.compat.compile_forms_together`, :data:`TEST_JIT`)."""
+    return compat.compile_forms_together(
+        {"E": form, "g": ufl.derivative(form, u),
+         "H": ufl.derivative(ufl.derivative(form, u), u)}, TEST_JIT)
+
+
 def assemble(form, u):
     """Energy, gradient and dense Hessian of ``form`` in ``u`` (DOLFINx dof order)."""
-    E = fem.assemble_scalar(fem.form(form))
-    g = fem_petsc.assemble_vector(fem.form(ufl.derivative(form, u))).array.copy()
-    H = fem_petsc.assemble_matrix(fem.form(ufl.derivative(ufl.derivative(form, u), u)))
+    forms = energy_forms(form, u)
+    E = fem.assemble_scalar(forms["E"])
+    g = fem_petsc.assemble_vector(forms["g"]).array.copy()
+    H = fem_petsc.assemble_matrix(forms["H"])
     H.assemble()
     dense = H.convert("dense")  # petsc4py 3.22's array is a view: copied while it lives
     return E, g, dense.getDenseArray().copy()
@@ -149,10 +167,11 @@ def clamped_newton(energy, u: fem.Function, clamped):
     dofs at the points where ``clamped(x)`` holds. Returns ``solve(iterations, tol,
     must_converge=True)``, which updates ``u`` until the update is below ``tol`` of the
     largest displacement (raising after ``iterations`` if ``must_converge``); the forms are
-    compiled once, so a load can change between calls through its Constants."""
+    compiled once (:func:`energy_forms`), so a load can change between calls through its
+    Constants."""
     V = u.function_space
-    residual = fem.form(ufl.derivative(energy, u))
-    tangent = fem.form(ufl.derivative(ufl.derivative(energy, u), u))
+    forms = energy_forms(energy, u)
+    residual, tangent = forms["g"], forms["H"]
     held = fem.locate_dofs_geometrical(V, clamped)
     bc = fem.dirichletbc(np.zeros(3), held, V)
     held_dofs = (held[:, None] * 3 + np.arange(3)).ravel()

@@ -7,17 +7,53 @@ compiler flags (:data:`JIT_OPTIONS`).
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sysconfig
+
 import ufl
 
 from fem_anim import compat
 
-__all__ = ["JIT_OPTIONS", "compile_forms"]
+__all__ = ["JIT_OPTIONS", "compile_forms", "gcc_flags"]
 
-#: FFCx/CFFI options of every kernel the problem compiles (forms and expressions). ``-g0``
-#: because CFFI compiles with Python's own CFLAGS, which carry ``-g``: debug information
-#: changes no instruction but slows gcc on large kernels (docs/cloth.md, "Cost").
-JIT_OPTIONS = {"cffi_extra_compile_args": ["-O2", "-g0", "-march=native"]}
 
+def gcc_flags(gcc_major: int) -> list[str]:
+    """The gcc flags of the problem's kernels for a gcc of major version ``gcc_major``.
+
+    ``-O2 -march=native``: the kernels run every Newton iteration (``-O1`` assembles
+    markedly slower). ``-g0`` because CFFI compiles with Python's own CFLAGS, which carry
+    ``-g``: debug information changes no instruction but slows gcc on large kernels
+    (docs/cloth.md, "Cost"). From gcc 14 (Debian 13) also ``-fno-schedule-insns2``: tuning
+    for the machine's CPU, gcc 14 can spend nearly all of a kernel's compile in its second
+    instruction scheduling pass (gcc 12, Debian 12, does not), which an out-of-order CPU
+    hardly needs; the assembly it gives up is small (docs/cloth.md, "Cost").
+
+    Args:
+        gcc_major: gcc's major version (0 when unknown: the flags of gcc 12).
+
+    Returns:
+        The flags, in the order they are given to gcc (after Python's own CFLAGS).
+    """
+    flags = ["-O2", "-g0", "-march=native"]
+    return flags + ["-fno-schedule-insns2"] if gcc_major >= 14 else flags
+
+
+def _gcc_major() -> int:
+    """The major version of the C compiler CFFI's build runs (``CC``, else Python's), 0 if
+    it cannot be asked."""
+    cc = (os.environ.get("CC") or sysconfig.get_config_var("CC") or "gcc").split()
+    try:
+        out = subprocess.run([*cc, "-dumpversion"], capture_output=True, text=True,
+                             timeout=60, check=False).stdout.strip()
+        return int(out.split(".")[0])
+    except (OSError, ValueError, subprocess.SubprocessError):
+        return 0
+
+
+#: FFCx/CFFI options of every kernel the problem compiles (forms and expressions): the
+#: :func:`gcc_flags` of the machine's gcc.
+JIT_OPTIONS = {"cffi_extra_compile_args": gcc_flags(_gcc_major())}
 
 def compile_forms(forms: dict[str, ufl.Form]) -> dict:
     """Compile UFL forms with FFCx into one module, with cache keys independent of history.
