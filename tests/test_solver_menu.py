@@ -55,8 +55,13 @@ SAME_MINIMISER_RTOL = 1e-6
 def squash(tmp_path, model="stvk", hessian="exact", dt=0.05, steps=4, element_size=0.05,
            solver="", cli=None):
     path = tmp_path / f"squash_{model}_{hessian}.toml"
-    path.write_text(SQUASH.format(model=model, hessian=hessian, dt=dt, steps=steps,
-                                  element_size=element_size, solver=solver))
+    # one writer (tests/mpi/mpi_trust_region_check.py runs this on 2 ranks): a rank reading
+    # the file while another truncates it to write it again read a partial scene, raised
+    # alone and left the other rank waiting in the mesh's broadcast (a hang under load)
+    if MPI.COMM_WORLD.rank == 0:
+        path.write_text(SQUASH.format(model=model, hessian=hessian, dt=dt, steps=steps,
+                                      element_size=element_size, solver=solver))
+    MPI.COMM_WORLD.Barrier()
     return Simulation(load_scene(path), MPI.COMM_WORLD, cli_options=cli)
 
 

@@ -18,6 +18,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from test_solver_menu import squash  # noqa: E402
 
 comm = MPI.COMM_WORLD
+
+
+def _abort(*exc_info) -> None:
+    """An error on one rank ends every rank (the others would wait in a collective)."""
+    sys.__excepthook__(*exc_info)
+    comm.Abort(1)
+
+
+sys.excepthook = _abort
 folder = comm.bcast(tempfile.mkdtemp() if comm.rank == 0 else None, root=0)
 sim = squash(Path(folder), "stvk", hessian="auto", element_size=0.1,
              solver='preset = "cg-icc"')
