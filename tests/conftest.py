@@ -95,6 +95,19 @@ def mpirun_command(n: int) -> list[str] | None:
     return cmd
 
 
+def run_file_under_mpirun(path: str | Path, ranks: int, cwd: Path) -> None:
+    """Run the test file ``path`` as a script (its ``__main__`` checks, exit 0 when they hold)
+    under ``mpirun -n ranks`` in ``cwd``; skip without mpirun, fail with its output."""
+    import subprocess
+
+    mpirun = mpirun_command(ranks)
+    if mpirun is None:
+        pytest.skip("mpirun not available")
+    proc = subprocess.run([*mpirun, sys.executable, str(path)], cwd=cwd, capture_output=True,
+                          text=True, timeout=600, env=clean_environment())
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
 def run_on_one_and_more_ranks(scene: Path, folder: Path, ranks: int = 2) -> dict[int, Path]:
     """``fem-anim run -q SCENE`` on one rank, then under ``mpirun -n ranks`` (the test is
     skipped without mpirun); each run must succeed.

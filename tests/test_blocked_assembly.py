@@ -16,13 +16,11 @@ entries bit for bit, on the same pattern:
 
 from __future__ import annotations
 
-import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import clean_environment, mpirun_command
+from conftest import run_file_under_mpirun
 from mpi4py import MPI
 from petsc4py import PETSc
 from test_constant_terms import PIN_VELOCITY, SCENE
@@ -90,12 +88,7 @@ def test_blocked_hessian_equals_the_direct_one_with_pins():
 @pytest.mark.mpi
 def test_blocked_hessian_under_mpi(tmp_path):
     """The same on three ranks."""
-    mpirun = mpirun_command(3)
-    if mpirun is None:
-        pytest.skip("mpirun not available")
-    proc = subprocess.run([*mpirun, sys.executable, str(Path(__file__))], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=600, env=clean_environment())
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    run_file_under_mpirun(__file__, 3, tmp_path)
 
 
 def test_blocked_hessian_equals_the_direct_one_and_keeps_the_pattern(monkeypatch):

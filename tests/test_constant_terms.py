@@ -16,14 +16,12 @@ choice was made the rule: ``EnergyProblem._owners_choice``).
 
 from __future__ import annotations
 
-import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import ufl
-from conftest import clean_environment, mpirun_command
+from conftest import run_file_under_mpirun
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -116,12 +114,7 @@ def test_constant_terms_equal_the_single_form():
 @pytest.mark.mpi
 def test_constant_terms_under_mpi(tmp_path):
     """The same on three ranks: ghosts, the pins' owners, the collective dot products."""
-    mpirun = mpirun_command(3)
-    if mpirun is None:
-        pytest.skip("mpirun not available")
-    proc = subprocess.run([*mpirun, sys.executable, str(Path(__file__))], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=600, env=clean_environment())
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    run_file_under_mpirun(__file__, 3, tmp_path)
 
 
 if __name__ == "__main__":

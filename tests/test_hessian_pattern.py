@@ -17,13 +17,11 @@ two runs of one scene on two ranks need not agree in the last bit).
 
 from __future__ import annotations
 
-import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import clean_environment, mpirun_command
+from conftest import run_file_under_mpirun
 from mpi4py import MPI
 from petsc4py import PETSc
 from test_contact_pace import STACK
@@ -128,12 +126,7 @@ def test_a_widened_pattern_is_analysed_again():
 def test_contact_entries_widen_the_pattern_at_once_under_mpi(tmp_path):
     """On two ranks the entries are added one by one (the matrix's pattern state is not
     safe to re-preallocate there): no widening, the same steps."""
-    mpirun = mpirun_command(2)
-    if mpirun is None:
-        pytest.skip("mpirun not available")
-    proc = subprocess.run([*mpirun, sys.executable, str(Path(__file__))], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=600, env=clean_environment())
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    run_file_under_mpirun(__file__, 2, tmp_path)
 
 
 if __name__ == "__main__":
